@@ -1,0 +1,51 @@
+"""Ornstein–Uhlenbeck exploration (SPEC §1.3): temporally correlated random yaw rates for data collection."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from depthq.configio import to_dict
+from depthq.control.policy import Observation
+from depthq.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class OUConfig:
+    """x_{t+1} = x_t + theta·(mu − x_t) + sigma·N(0, 1);  a_t = clip(scale·x_t, −1, 1)."""
+
+    theta: float = 0.05
+    mu: float = 0.0
+    sigma: float = 1.0
+    scale: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.theta <= 1:
+            raise ConfigError(f"OU theta must lie in [0, 1], got {self.theta}")
+        if not self.sigma >= 0:
+            raise ConfigError(f"OU sigma must be >= 0, got {self.sigma}")
+
+
+class OUPolicy:
+    """Ignores the observation; the noise state restarts at 0 with every run (`reset`)."""
+
+    name = "ou"
+
+    def __init__(self, config: OUConfig = OUConfig(), seed: int | None = None) -> None:
+        self.config = config
+        self.reset(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        self._rng = np.random.default_rng(seed)
+        self._x = 0.0
+
+    def act(self, obs: Observation | None = None) -> float:
+        c = self.config
+        action = float(np.clip(c.scale * self._x, -1.0, 1.0))
+        self._x += c.theta * (c.mu - self._x) + c.sigma * float(self._rng.standard_normal())
+        return action
+
+    def describe(self) -> dict[str, Any]:
+        return {"policy": self.name, "config": to_dict(self.config)}

@@ -1,0 +1,26 @@
+"""Build any policy from its name on the command line: 'heuristic', 'ou' or a checkpoint folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from depthq.control.heuristic import DepthHeuristic
+from depthq.control.ou import OUPolicy
+from depthq.control.policy import Policy
+from depthq.errors import ConfigError
+
+BUILTIN = ("heuristic", "ou")
+
+
+def make_policy(spec: str, seed: int | None = None) -> Policy:
+    """`spec` is 'heuristic', 'ou' or the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder."""
+    if spec == "heuristic":
+        return DepthHeuristic()
+    if spec == "ou":
+        return OUPolicy(seed=seed)
+    path = Path(spec)
+    if path.is_dir():
+        from depthq.control.qnet_policy import QNetPolicy
+
+        return QNetPolicy.from_checkpoint(path)
+    raise ConfigError(f"unknown policy {spec!r}: expected one of {BUILTIN} or a checkpoint folder")

@@ -1,0 +1,209 @@
+"""A dataset folder: one manifest and one HDF5 file per run.
+
+Layout:
+
+    DIR/manifest.json           what the folder holds (rewritten atomically after every run)
+    DIR/runs/train_000123.h5    training run 123 (see `depthq.data.runfile` for the file's layout)
+    DIR/runs/val_000004.h5      validation run 4
+    DIR/runs/.*.tmp             a run being written; never read, removed when collection resumes
+
+manifest.json:
+
+    format, format_version      "depthq-dataset", 1
+    provenance                  package and version that wrote it (`depthq.configio.provenance`)
+    seed                        the collection seed
+    config                      the collection config that made the runs (a JSON object)
+    runs                        one row per completed run, sorted by split and index:
+        split, index            "train" | "val", position in that split (the file name says both)
+        file                    path relative to DIR, e.g. "runs/train_000123.h5"
+        n_frames, end_reason    frame count; "bump" | "contact" (collisions) | "time_limit" | "step_limit"
+        canyon_split, canyon_index, canyon_seed, policy_seed
+                                the canyon the run drove in and the exploration policy's seed
+        sha256, bytes           the file's hash and size, checked before the file is read as data
+
+A run exists once its row is in the manifest: a file without a row (a crash between the two
+writes) is written again on resume. Rows hold no timestamps, so the same seeds give the same bytes.
+Only one process (the collector's parent) writes the manifest; workers only write run files.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
+from depthq.data.run import Run, RunMeta, meta_fields
+from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, write_run
+from depthq.errors import ConfigError, DataError
+
+MANIFEST = "manifest.json"
+RUNS = "runs"
+FORMAT = "depthq-dataset"
+FORMAT_VERSION = 1
+_MISSING = object()
+
+
+@dataclass(frozen=True)
+class RunEntry(RunMeta):
+    """A manifest row: a completed run's metadata plus where its file is and how to check it."""
+
+    file: str
+    sha256: str
+    bytes: int
+
+    @property
+    def info(self) -> FileInfo:
+        return FileInfo(sha256=self.sha256, bytes=self.bytes)
+
+    def run_meta(self) -> RunMeta:
+        return RunMeta(**{name: getattr(self, name) for name in meta_fields()})
+
+
+class Dataset:
+    """A dataset folder. `create` starts or resumes one (the collector), `open` reads one (everyone else)."""
+
+    def __init__(self, root: Path, config: dict[str, Any], seed: int, runs: list[RunEntry]) -> None:
+        self.root = Path(root)
+        self.config = config
+        self.seed = seed
+        self._runs = {(r.split, r.index): r for r in runs}
+
+    @classmethod
+    def open(cls, root: Path) -> Dataset:
+        root = Path(root)
+        if not root.is_dir():
+            raise ConfigError(f"{root}: no such dataset folder")
+        path = root / MANIFEST
+        if not path.is_file():
+            raise ConfigError(f"{root}: not a dataset folder (no {MANIFEST})")
+        data = read_json(path)
+        try:
+            if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
+                raise ValueError(f"format {data.get('format')!r} version {data.get('format_version')!r}")
+            runs = [from_dict(RunEntry, row) for row in data["runs"]]
+            return cls(root, data["config"], int(data["seed"]), runs)
+        except (AttributeError, KeyError, TypeError, ValueError) as err:
+            raise DataError(f"{path}: not a valid {FORMAT} manifest ({err})") from err
+
+    @classmethod
+    def create(cls, root: Path, config: dict[str, Any], seed: int, overwrite: bool = False) -> Dataset:
+        """Start a dataset in `root`, or resume the one there if it was made with the same config and seed.
+
+        A dataset made with another config or seed is a ConfigError naming the differing keys.
+        `overwrite` starts afresh whatever is there: it deletes the manifest and all runs first.
+        """
+        root = Path(root)
+        config = json.loads(json.dumps(config))  # the form it takes in the manifest (tuples become lists)
+        if overwrite:
+            (root / MANIFEST).unlink(missing_ok=True)
+            shutil.rmtree(root / RUNS, ignore_errors=True)
+        elif (root / MANIFEST).is_file():
+            old = cls.open(root)
+            differing = _differing_keys(
+                {"config": old.config, "seed": old.seed}, {"config": config, "seed": seed}
+            )
+            if differing:
+                raise ConfigError(
+                    f"{root} holds a dataset made with a different configuration (differs in: "
+                    f"{', '.join(differing)}); use another folder, or overwrite it"
+                )
+            old._remove_temporaries()
+            return old
+        elif root.exists() and any(p.name != RUNS for p in root.iterdir()):
+            raise ConfigError(f"{root}: exists, is not empty and is not a dataset folder (no {MANIFEST})")
+        dataset = cls(root, config, seed, [])
+        (root / RUNS).mkdir(parents=True, exist_ok=True)
+        dataset._remove_temporaries()
+        dataset._write_manifest()
+        return dataset
+
+    def entries(self, split: str | None = None) -> list[RunEntry]:
+        """Manifest rows (of one split, or all), sorted by split and index."""
+        return [self._runs[key] for key in sorted(self._runs) if split is None or key[0] == split]
+
+    def has(self, split: str, index: int) -> bool:
+        return (split, index) in self._runs
+
+    def run_path(self, split: str, index: int) -> Path:
+        """Where run `index` of `split` is (to be) written."""
+        return self.root / RUNS / f"{split}_{index:06d}.h5"
+
+    def path(self, entry: RunEntry) -> Path:
+        return self.root / entry.file
+
+    def add(self, meta: RunMeta, info: FileInfo) -> RunEntry:
+        """Record a run whose file was written to `run_path` (by `write_run`, maybe in a worker)."""
+        path = self.run_path(meta.split, meta.index)
+        if not path.is_file() or path.stat().st_size != info.bytes:
+            raise DataError(f"{path}: not the {info.bytes}-byte file that was written for run {meta.name}")
+        entry = RunEntry(**to_dict(meta), file=path.relative_to(self.root).as_posix(), **to_dict(info))
+        self._runs[(meta.split, meta.index)] = entry
+        self._write_manifest()
+        return entry
+
+    def add_run(self, run: Run, jpeg_quality: int = JPEG_QUALITY) -> RunEntry:
+        """Write a run's file and record it (one process; parallel workers use write_run + add)."""
+        info = write_run(self.run_path(run.meta.split, run.meta.index), run, jpeg_quality)
+        return self.add(run.meta, info)
+
+    def reader(self, entry: RunEntry) -> RunReader:
+        """An open reader of a run's file, checked against the manifest first."""
+        return RunReader(self.path(entry), entry.info)
+
+    def read_run(self, entry: RunEntry, images: bool = True) -> Run:
+        with self.reader(entry) as reader:
+            return reader.run(images)
+
+    def verify(self, progress: bool = False) -> list[str]:
+        """Read every run in full; one message per missing, extra, truncated, corrupted or odd file."""
+        problems = []
+        for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
+            try:
+                run = self.read_run(entry)
+            except DataError as err:
+                problems.append(str(err))
+                continue
+            if run.meta != entry.run_meta():
+                differing = _differing_keys(to_dict(run.meta), to_dict(entry.run_meta()))
+                problems.append(
+                    f"{self.path(entry)}: differs from its manifest row in {', '.join(differing)}"
+                )
+        listed = {self.path(entry) for entry in self.entries()}
+        for path in sorted((self.root / RUNS).glob("*.h5")):
+            if path not in listed:
+                problems.append(f"{path}: extra file, not in {MANIFEST}")
+        return problems
+
+    def _write_manifest(self) -> None:
+        write_json(
+            self.root / MANIFEST,
+            {
+                "format": FORMAT,
+                "format_version": FORMAT_VERSION,
+                "provenance": provenance(),
+                "seed": self.seed,
+                "config": self.config,
+                "runs": [to_dict(entry) for entry in self.entries()],
+            },
+        )
+
+    def _remove_temporaries(self) -> None:
+        for tmp in (self.root / RUNS).glob(".*.tmp"):
+            tmp.unlink(missing_ok=True)
+
+
+def _differing_keys(old: Any, new: Any, prefix: str = "") -> list[str]:
+    """Dotted paths of the leaves that differ between two JSON values."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        keys = sorted(set(old) | set(new))
+        return [
+            path
+            for key in keys
+            for path in _differing_keys(old.get(key, _MISSING), new.get(key, _MISSING), f"{prefix}{key}.")
+        ]
+    return [] if old == new else [prefix.rstrip(".")]

@@ -1,0 +1,157 @@
+"""The two training views of a dataset: samples as arrays (for cached features) and as PyTorch datasets.
+
+A view is the sample list of one split (or nested subset) for one network:
+
+    kind "depth"  (image_t, a_t, bins[t + 1])   Depth-Q-Net; collision runs lose their last H samples
+    kind "coll"   (image_t, a_t, y_t)           Coll-Q-Net; every frame with an action
+
+`view_arrays` gives everything but the images as NumPy arrays, samples ordered by run then frame,
+with `run_offsets` so that "a random run, then a random frame of it" (SPEC §1.6) can be drawn on
+precomputed trunk features as well (`run_then_frame`). `DepthView`/`CollView` add the images,
+decoded on demand from run files opened lazily (a bounded number per process, reopened after a
+fork), so a 900-run dataset never sits in memory. Draw their batches with `view.sampler(...)`.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from torch.utils.data import Dataset as TorchDataset
+from torch.utils.data import Sampler
+
+from depthq.data import DataConfig
+from depthq.data.labels import coll_sample_indices, collision_labels, depth_sample_indices
+from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.runfile import RunReader
+from depthq.data.subsets import select_runs
+from depthq.errors import ConfigError
+
+KINDS = ("depth", "coll")
+
+
+def view_arrays(
+    dataset: Dataset, split: str, n_runs: int | None, kind: str, config: DataConfig | None = None
+) -> dict[str, np.ndarray]:
+    """All samples of a view, run by run.
+
+    Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
+    `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
+    `frame_id` (t), `action` (a_t), and `target`: bins[t + 1] (S, 26) for "depth", y_t (S,) for "coll".
+    """
+    if kind not in KINDS:
+        raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
+    config = config or DataConfig()
+    runs = select_runs(dataset, split, n_runs, config.min_frames)
+    frame_ids, actions, targets = [], [], []
+    for entry in runs:
+        run = dataset.read_run(entry, images=False)
+        if kind == "depth":
+            t = depth_sample_indices(run.n_frames, entry.collision, config.horizon)
+            target = run.bins[t + 1]
+        else:
+            t = coll_sample_indices(run.n_frames)
+            target = collision_labels(run.n_frames, entry.collision, config.horizon)
+        frame_ids.append(t)
+        actions.append(run.actions[t])
+        targets.append(target)
+    counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
+    run_index = np.array([entry.index for entry in runs], dtype=np.int64)
+    return {
+        "run_index": run_index,
+        "run_offsets": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        "run_id": np.repeat(run_index, counts),
+        "frame_id": np.concatenate(frame_ids) if runs else np.zeros(0, np.int64),
+        "action": np.concatenate(actions) if runs else np.zeros(0, np.float32),
+        "target": np.concatenate(targets) if runs else np.zeros(0, np.float32),
+    }
+
+
+def run_then_frame(run_offsets: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """`n` sample indices, each from a uniformly random run, then a uniformly random sample of that run.
+
+    Short runs are drawn as often as long ones, as in the original training code.
+    """
+    runs = rng.integers(len(run_offsets) - 1, size=n)
+    starts = run_offsets[runs]
+    return starts + rng.integers(0, run_offsets[runs + 1] - starts)
+
+
+class RunThenFrameSampler(Sampler[int]):
+    """DataLoader indices by `run_then_frame`; each pass draws new ones from one seeded stream."""
+
+    def __init__(self, run_offsets: np.ndarray, num_samples: int, seed: int) -> None:
+        self.run_offsets = run_offsets
+        self.num_samples = num_samples
+        self._rng = np.random.default_rng(seed)
+
+    def __len__(self) -> int:
+        return self.num_samples
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(run_then_frame(self.run_offsets, self.num_samples, self._rng).tolist())
+
+
+class FrameView(TorchDataset):
+    """Map-style dataset of one view: item i is (image uint8 (H, W, 3), action float32, target float32)."""
+
+    kind: str
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        split: str,
+        n_runs: int | None = None,
+        config: DataConfig | None = None,
+        max_open_files: int = 64,
+    ) -> None:
+        self.dataset = dataset
+        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config)
+        self._entries: dict[int, RunEntry] = {entry.index: entry for entry in dataset.entries(split)}
+        self._max_open = max_open_files
+        self._readers: OrderedDict[int, RunReader] = OrderedDict()
+        self._pid = os.getpid()
+
+    def __len__(self) -> int:
+        return len(self.arrays["frame_id"])
+
+    def __getitem__(self, i: int) -> tuple[np.ndarray, np.float32, np.ndarray]:
+        run_id = int(self.arrays["run_id"][i])
+        image = self._reader(run_id).image(int(self.arrays["frame_id"][i]))
+        return image, self.arrays["action"][i], self.arrays["target"][i]
+
+    def sampler(self, num_samples: int, seed: int) -> RunThenFrameSampler:
+        """Random run, then random frame (SPEC §1.6), reproducible from `seed`."""
+        return RunThenFrameSampler(self.arrays["run_offsets"], num_samples, seed)
+
+    def _reader(self, run_id: int) -> RunReader:
+        """The run's open file; at most `max_open_files` stay open, least recently used closed first."""
+        if self._pid != os.getpid():  # a forked DataLoader worker: the parent's HDF5 handles are not ours
+            self._readers, self._pid = OrderedDict(), os.getpid()
+        reader = self._readers.pop(run_id, None)
+        if reader is None:
+            reader = self.dataset.reader(self._entries[run_id])
+            if len(self._readers) >= self._max_open:
+                self._readers.popitem(last=False)[1].close()
+        self._readers[run_id] = reader
+        return reader
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_readers"] = OrderedDict()  # open files do not travel to worker processes
+        return state
+
+
+class DepthView(FrameView):
+    """Depth-Q-Net's samples: target = the next frame's 26 depth bins (NaN = invalid bin)."""
+
+    kind = "depth"
+
+
+class CollView(FrameView):
+    """Coll-Q-Net's samples: target = 1.0 if a collision follows within H frames, else 0.0."""
+
+    kind = "coll"

@@ -1,0 +1,155 @@
+"""The task (dm_control's "task"): drive at constant speed through a canyon until a bump, a
+contact with a wall or the time limit. Gymnasium env `depthq/Canyon-v0`.
+
+Observation: {"image": uint8 (308, 410, 3) camera frame with pixel noise,
+              "scan": float32 (360,) LiDAR (index = bearing in degrees, CCW; inf = nothing in range,
+                      0 = invalid), "bins": float32 (26,) depth bins left→right (NaN = invalid)}.
+Action: yaw rate in rad/s, shape (1,), clipped to [−1, 1]; +a turns left.
+Reward: metres gained on the furthest straight-line distance from the spawn point (what Table I measures).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from depthq.errors import ConfigError
+from depthq.sim.canyon import CANYON_ENTROPY, STREAMS, CanyonId, generate_canyon
+from depthq.sim.sensors import BinConfig, BumpConfig, bump, depth_bins
+from depthq.sim.world import CanyonWorld, WorldConfig
+
+SPAWN = (0.0, 0.0, math.pi / 2)  # (x, y, yaw): at the origin, facing +y
+END_REASONS = ("bump", "contact", "time_limit")
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Everything that defines an episode: the world, the sensors' post-processing, the limits."""
+
+    world: WorldConfig = field(default_factory=WorldConfig)
+    bins: BinConfig = field(default_factory=BinConfig)
+    bump: BumpConfig = field(default_factory=BumpConfig)
+    time_limit_s: float = 45.0
+
+    def __post_init__(self) -> None:
+        if not self.time_limit_s > 0:
+            raise ConfigError(f"time_limit_s must be > 0, got {self.time_limit_s}")
+
+
+def parse_canyon(value: Any) -> CanyonId:
+    """Accept CanyonId, 'eval:3' or ('eval', 3)."""
+    if isinstance(value, CanyonId):
+        return value
+    if isinstance(value, str):
+        return CanyonId.parse(value)
+    if isinstance(value, tuple | list) and len(value) == 2:
+        return CanyonId(str(value[0]), int(value[1]))
+    raise ConfigError(f"canyon must be 'stream:index' or (stream, index), got {value!r}")
+
+
+class CanyonEnv(gym.Env):
+    """A TurtleBot3 Burger in a random canyon, seen through its camera and LiDAR."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None) -> None:
+        self.config = config or EnvConfig()
+        if render_mode not in (None, "rgb_array"):
+            raise ConfigError(f"unknown render_mode {render_mode!r}; expected None or 'rgb_array'")
+        self.render_mode = render_mode
+        cam = self.config.world.camera
+        self.observation_space = spaces.Dict(
+            {
+                "image": spaces.Box(0, 255, (cam.height, cam.width, 3), np.uint8),
+                "scan": spaces.Box(0.0, np.inf, (self.config.world.lidar.n_rays,), np.float32),
+                "bins": spaces.Box(0.0, self.config.bins.clip, (self.config.bins.n_bins,), np.float32),
+            }
+        )
+        self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self.world = CanyonWorld(self.config.world)
+        self.dt = 1.0 / self.config.world.decision_hz
+        self.canyon_id: CanyonId | None = None
+        self.trajectory: list[np.ndarray] = []
+        self._obs: dict[str, np.ndarray] | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        if "canyon" in options:
+            canyon_id = parse_canyon(options["canyon"])
+        else:
+            canyon_id = CanyonId("train", int(self.np_random.integers(0, 2**31 - 1)))
+        if canyon_id != self.canyon_id:
+            appearance = np.random.default_rng([CANYON_ENTROPY, STREAMS[canyon_id.stream], canyon_id.index, 1])
+            self.world.load(generate_canyon(canyon_id, self.config.world.canyon), appearance)
+            self.canyon_id = canyon_id
+        self.world.place(*SPAWN)
+        self.time = 0.0
+        self.path_length = 0.0
+        self.distance = 0.0
+        self.trajectory = [self.world.pose]
+        self._obs = self._observe()
+        return self._obs, self._info(None)
+
+    def step(self, action):
+        if self._obs is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64).reshape(-1)
+        if a.size != 1 or not np.isfinite(a[0]):
+            raise ConfigError(f"action must be one finite yaw rate, got {action!r}")
+        yaw_rate = float(np.clip(a[0], -1.0, 1.0)) * self.config.world.max_yaw_rate
+        before = self.world.pose
+        contact = self.world.advance(yaw_rate)
+        self.time = round(self.time + self.dt, 9)
+        pose = self.world.pose
+        self.trajectory.append(pose)
+        self.path_length += float(np.hypot(*(pose[:2] - before[:2])))
+        gained = max(0.0, float(np.hypot(*(pose[:2] - SPAWN[:2]))) - self.distance)
+        self.distance += gained
+        self._obs = self._observe()
+        reason = None
+        if contact:
+            reason = "contact"
+        elif self.time >= self.config.bump.grace_s - 1e-9 and bump(self._obs["scan"], self.config.bump):
+            reason = "bump"
+        elif self.time >= self.config.time_limit_s - 1e-9:
+            reason = "time_limit"
+        terminated = reason in ("bump", "contact")
+        return self._obs, gained, terminated, reason == "time_limit", self._info(reason)
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        scan = self.world.scan(self.np_random)
+        return {
+            "image": self.world.image(self.np_random),
+            "scan": scan,
+            "bins": depth_bins(scan, self.config.bins),
+        }
+
+    def _info(self, end_reason: str | None) -> dict[str, Any]:
+        return {
+            "pose": self.trajectory[-1].copy(),
+            "time": self.time,
+            "path_length": self.path_length,
+            "distance": self.distance,
+            "canyon": str(self.canyon_id),
+            "end_reason": end_reason,
+        }
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode == "rgb_array" and self._obs is not None:
+            return self._obs["image"]
+        return None
+
+    def top_down(self, path: str | None = None):
+        """A top-down map of the canyon with the trajectory so far (matplotlib figure, saved if `path`)."""
+        from depthq.sim.topdown import plot_runs
+
+        return plot_runs([(self.world.canyon, np.array(self.trajectory))], path=path)
+
+    def close(self) -> None:
+        self.world.close()
