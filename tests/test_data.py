@@ -97,8 +97,10 @@ def test_labels_of_a_run_without_collision() -> None:
 
 
 def test_short_runs_are_left_out(tmp_path: Path) -> None:
-    dataset = make_dataset(tmp_path / "d", [21, 19, 20, 25])
+    dataset = make_dataset(tmp_path / "d", [21, 19, 20, 25], val_lengths=(19,))
     assert [usable(e, 20) for e in dataset.entries("train")] == [True, False, True, True]
+    with pytest.raises(ConfigError, match="no usable val runs"):
+        DepthView(dataset, "val", None, CONFIG)
     assert [e.index for e in select_runs(dataset, "train", None, 20)] == [0, 2, 3]
     arrays = view_arrays(dataset, "train", None, "coll", CONFIG)
     assert arrays["run_index"].tolist() == [0, 2, 3]

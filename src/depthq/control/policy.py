@@ -6,7 +6,9 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-Observation = dict[str, np.ndarray]  # {"image": uint8 (H, W, 3), "scan": float32 (360,), "bins": float32 (26,)}
+Observation = dict[
+    str, np.ndarray
+]  # {"image": uint8 (H, W, 3), "scan": float32 (360,), "bins": float32 (26,)}
 
 
 @runtime_checkable

@@ -129,6 +129,9 @@ class Dataset:
     def has(self, split: str, index: int) -> bool:
         return (split, index) in self._runs
 
+    def entry(self, split: str, index: int) -> RunEntry:
+        return self._runs[(split, index)]
+
     def run_path(self, split: str, index: int) -> Path:
         """Where run `index` of `split` is (to be) written."""
         return self.root / RUNS / f"{split}_{index:06d}.h5"

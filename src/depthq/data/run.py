@@ -14,7 +14,7 @@ import numpy as np
 from depthq.sim.sensors import N_RAYS
 
 SPLITS = ("train", "val")
-CANYON_SPLITS = ("train", "eval")
+CANYON_SPLITS = ("train", "val", "eval")  # the canyon streams of depthq.sim.canyon
 COLLISION_END_REASONS = ("bump", "contact")
 END_REASONS = (*COLLISION_END_REASONS, "time_limit", "step_limit")
 

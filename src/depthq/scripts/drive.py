@@ -60,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
     else:
-        print(f"{args.policy} in {canyon}: {result['distance']:.2f} m from the spawn in {result['time']:.1f} s, "
-              f"ended by {result['end_reason']}; map and frames in {args.out}")
+        print(
+            f"{args.policy} in {canyon}: {result['distance']:.2f} m from the spawn "
+            f"in {result['time']:.1f} s, ended by {result['end_reason']}; map and frames in {args.out}"
+        )
     return 0

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -55,7 +55,7 @@ def parse_canyon(value: Any) -> CanyonId:
 class CanyonEnv(gym.Env):
     """A TurtleBot3 Burger in a random canyon, seen through its camera and LiDAR."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None) -> None:
         self.config = config or EnvConfig()
@@ -85,7 +85,9 @@ class CanyonEnv(gym.Env):
         else:
             canyon_id = CanyonId("train", int(self.np_random.integers(0, 2**31 - 1)))
         if canyon_id != self.canyon_id:
-            appearance = np.random.default_rng([CANYON_ENTROPY, STREAMS[canyon_id.stream], canyon_id.index, 1])
+            appearance = np.random.default_rng(
+                [CANYON_ENTROPY, STREAMS[canyon_id.stream], canyon_id.index, 1]
+            )
             self.world.load(generate_canyon(canyon_id, self.config.world.canyon), appearance)
             self.canyon_id = canyon_id
         self.world.place(*SPAWN)

@@ -32,7 +32,11 @@ class CameraConfig:
     noise_std: float = 0.007  # on intensities in [0, 1]
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.width, int) and isinstance(self.height, int)) or self.width <= 0 or self.height <= 0:
+        if (
+            not (isinstance(self.width, int) and isinstance(self.height, int))
+            or self.width <= 0
+            or self.height <= 0
+        ):
             raise ConfigError(f"camera resolution must be positive integers, got {self.width}×{self.height}")
         if not 0.0 < self.hfov_deg < 180.0:
             raise ConfigError(f"camera hfov_deg must lie in (0, 180), got {self.hfov_deg}")
@@ -58,8 +62,9 @@ class RobotConfig:
     sensor_offset_x: float = -0.032  # LiDAR (and camera) sit 3.2 cm behind the axle, as on the robot
 
 
-def build_mjcf(canyon: CanyonConfig, camera: CameraConfig, robot: RobotConfig, lidar: LidarConfig,
-               physics_dt: float) -> str:
+def build_mjcf(
+    canyon: CanyonConfig, camera: CameraConfig, robot: RobotConfig, lidar: LidarConfig, physics_dt: float
+) -> str:
     """The world's MJCF. Walls start parked behind the canyon; `CanyonWorld.load` places them."""
     n_walls = 2 * (canyon.n_segments + 1) + 1
     walls = "\n".join(
@@ -68,7 +73,7 @@ def build_mjcf(canyon: CanyonConfig, camera: CameraConfig, robot: RobotConfig, l
         for i in range(n_walls)
     )
     hl, hw, h = robot.length / 2, robot.width / 2, robot.body_height
-    sx = robot.sensor_offset_x
+    sx, r = robot.sensor_offset_x, robot.wheel_radius
     return f"""
 <mujoco model="depthq_canyon">
   <option timestep="{physics_dt}" gravity="0 0 0" integrator="Euler"/>
@@ -81,7 +86,8 @@ def build_mjcf(canyon: CanyonConfig, camera: CameraConfig, robot: RobotConfig, l
   </visual>
   <asset>
     <material name="robot" rgba="0.15 0.15 0.15 1"/>
-    <texture name="sky" type="skybox" builtin="flat" rgb1="0.78 0.80 0.84" rgb2="0.78 0.80 0.84" width="8" height="8"/>
+    <texture name="sky" type="skybox" builtin="flat" rgb1="0.78 0.80 0.84" rgb2="0.78 0.80 0.84"
+             width="8" height="8"/>
   </asset>
   <worldbody>
     <light name="sun" directional="true" castshadow="false" pos="0 0 10" dir="0.4 0.6 -1"
@@ -95,14 +101,14 @@ def build_mjcf(canyon: CanyonConfig, camera: CameraConfig, robot: RobotConfig, l
       <joint name="yaw" type="hinge" axis="0 0 1" damping="0"/>
       <geom name="chassis" type="box" size="{hl} {hw - 0.015} {h / 2 - 0.005}" pos="{sx} 0 {h / 2 + 0.01}"
             material="robot" group="{ROBOT_GROUP}" mass="1"/>
-      <geom name="wheel_left" type="cylinder" size="{robot.wheel_radius} 0.009" pos="0 {robot.wheel_separation / 2} {robot.wheel_radius}"
+      <geom name="wheel_left" type="cylinder" size="{r} 0.009" pos="0 {robot.wheel_separation / 2} {r}"
             euler="90 0 0" rgba="0.1 0.1 0.1 1" group="{ROBOT_GROUP}" mass="0.1"/>
-      <geom name="wheel_right" type="cylinder" size="{robot.wheel_radius} 0.009" pos="0 {-robot.wheel_separation / 2} {robot.wheel_radius}"
+      <geom name="wheel_right" type="cylinder" size="{r} 0.009" pos="0 {-robot.wheel_separation / 2} {r}"
             euler="90 0 0" rgba="0.1 0.1 0.1 1" group="{ROBOT_GROUP}" mass="0.1"/>
       <site name="lidar" pos="{sx} 0 {lidar.height}"/>
-      <camera name="eye" pos="{sx} 0 {camera.mount_height}" xyaxes="0 -1 0 0 0 1" fovy="{camera.fovy_deg:.6f}"/>
+      <camera name="eye" pos="{sx} 0 {camera.mount_height}" xyaxes="0 -1 0 0 0 1"
+              fovy="{camera.fovy_deg:.6f}"/>
     </body>
-    <camera name="top" pos="0 0 30" xyaxes="1 0 0 0 1 0" fovy="60" mode="fixed"/>
   </worldbody>
 </mujoco>
 """

@@ -30,7 +30,9 @@ class LidarConfig:
         if self.n_rays != N_RAYS:
             raise ConfigError(f"the LiDAR has 360 rays (1° apart); got n_rays={self.n_rays}")
         if not 0 <= self.range_min < self.range_max:
-            raise ConfigError(f"LiDAR range must satisfy 0 <= min < max, got {self.range_min}, {self.range_max}")
+            raise ConfigError(
+                f"LiDAR range must satisfy 0 <= min < max, got {self.range_min}, {self.range_max}"
+            )
         if not self.noise_std >= 0:
             raise ConfigError(f"LiDAR noise_std must be >= 0, got {self.noise_std}")
 

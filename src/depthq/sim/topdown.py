@@ -8,13 +8,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from depthq.sim.canyon import Canyon  # noqa: E402
+from depthq.sim.canyon import Canyon
 
 
-def draw_run(ax, canyon: Canyon, poses: np.ndarray | None, title: str | None = None, span: float | None = None):
+def draw_run(
+    ax, canyon: Canyon, poses: np.ndarray | None, title: str | None = None, span: float | None = None
+):
     """Walls in grey, the path in colour from the spawn (circle) to the end (cross)."""
     for wall in (canyon.left, canyon.right, canyon.back):
         ax.plot(wall[:, 0], wall[:, 1], color="0.35", lw=1.0)
@@ -36,8 +38,12 @@ def draw_run(ax, canyon: Canyon, poses: np.ndarray | None, title: str | None = N
         ax.set_title(title, fontsize=7)
 
 
-def plot_runs(runs: Sequence[tuple[Canyon, np.ndarray | None]], titles: Sequence[str] | None = None,
-              path: str | Path | None = None, cols: int = 10):
+def plot_runs(
+    runs: Sequence[tuple[Canyon, np.ndarray | None]],
+    titles: Sequence[str] | None = None,
+    path: str | Path | None = None,
+    cols: int = 10,
+):
     """One panel per run; saved as PNG when `path` is given. Returns the figure."""
     n = len(runs)
     cols = min(cols, n)

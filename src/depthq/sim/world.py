@@ -52,7 +52,9 @@ class WorldConfig:
             raise ConfigError(f"physics_dt must lie in (0, 0.005] s, got {self.physics_dt}")
         substeps = 1.0 / (self.decision_hz * self.physics_dt)
         if abs(substeps - round(substeps)) > 1e-6:
-            raise ConfigError(f"1/decision_hz must be a multiple of physics_dt, got {self.decision_hz}, {self.physics_dt}")
+            raise ConfigError(
+                f"1/decision_hz must be a multiple of physics_dt, got {self.decision_hz}, {self.physics_dt}"
+            )
         if self.appearance not in APPEARANCES:
             raise ConfigError(f"unknown appearance {self.appearance!r}; expected one of {APPEARANCES}")
 
@@ -101,7 +103,11 @@ class CanyonWorld:
         self._noise = _noise_table(255.0 * config.camera.noise_std)
         cam = config.camera
         # The robot's own body is hidden from its camera, as on the real robot (camera above the chassis).
-        self._eye = OffscreenCamera(self.model, cam.width, cam.height, hidden_groups=(ROBOT_GROUP,)) if render else None
+        self._eye = (
+            OffscreenCamera(self.model, cam.width, cam.height, hidden_groups=(ROBOT_GROUP,))
+            if render
+            else None
+        )
         self.canyon: Canyon | None = None
 
     @property
@@ -183,9 +189,18 @@ class CanyonWorld:
         rays[:, 0] = c * self._rays[:, 0] - s * self._rays[:, 1]
         rays[:, 1] = s * self._rays[:, 0] + c * self._rays[:, 1]
         mujoco.mj_multiRay(
-            self.model, self.data, self.data.site_xpos[self._lidar_site], rays.reshape(-1),
-            self._geomgroup, 1, self._robot_body, self._ray_geom, self._ray_dist, None,
-            len(rays), self.config.lidar.range_max + 1.0,
+            self.model,
+            self.data,
+            self.data.site_xpos[self._lidar_site],
+            rays.reshape(-1),
+            self._geomgroup,
+            1,
+            self._robot_body,
+            self._ray_geom,
+            self._ray_dist,
+            None,
+            len(rays),
+            self.config.lidar.range_max + 1.0,
         )
         return self._ray_dist.copy()
 

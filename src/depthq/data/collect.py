@@ -1,0 +1,217 @@
+"""Data collection (SPEC §1.3): OU exploration runs in fresh canyons, written as a run dataset.
+
+Run `i` of split `s` depends on (seed, s, i) alone: it drives canyon `s:i` (the `train` or `val`
+canyon stream, disjoint from each other and from the evaluation canyons) with sensor noise and OU
+noise seeded from `SeedSequence(seed, spawn_key=(split, i))`. So the stored arrays are the same
+whatever the number of workers and however often the collection was interrupted and resumed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from depthq.configio import to_dict
+from depthq.control.ou import OUConfig, OUPolicy
+from depthq.data import DataConfig
+from depthq.data.manifest import Dataset
+from depthq.data.run import SPLITS, Run, RunMeta
+from depthq.data.runfile import FileInfo, write_run
+from depthq.errors import ConfigError
+from depthq.sim.canyon import CanyonId
+from depthq.sim.env import CanyonEnv, EnvConfig
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """What a dataset is made of; stored in its manifest (a folder refuses a different one)."""
+
+    runs: int = 900
+    val_runs: int = 90
+    max_steps: int = 600  # a run that never bumps is cut here ("step_limit"); 60 s at 10 Hz
+    env: EnvConfig = field(default_factory=lambda: EnvConfig(time_limit_s=1e9))
+    ou: OUConfig = field(default_factory=OUConfig)
+    data: DataConfig = field(default_factory=DataConfig)
+
+    def __post_init__(self) -> None:
+        if self.runs < 1:
+            raise ConfigError(f"--runs must be >= 1, got {self.runs}")
+        if self.val_runs < 0:
+            raise ConfigError(f"--val-runs must be >= 0, got {self.val_runs}")
+        if self.max_steps < 1:
+            raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
+
+
+def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:
+    """(sensor-noise seed, OU seed) of one run, independent of every other run."""
+    ss = np.random.SeedSequence(seed, spawn_key=(SPLITS.index(split), index))
+    env_seed, policy_seed = ss.generate_state(2)
+    return int(env_seed), int(policy_seed)
+
+
+def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, index: int) -> Run:
+    """Drive one OU run until a bump, a contact or `max_steps`; every observation is a frame."""
+    env_seed, policy_seed = run_seeds(seed, split, index)
+    canyon = CanyonId(split, index)
+    policy = OUPolicy(config.ou, seed=policy_seed)
+    obs, info = env.reset(seed=env_seed, options={"canyon": canyon})
+    images, scans, bins, actions, poses, times = [], [], [], [], [], []
+    end_reason = "step_limit"
+    for step in range(config.max_steps + 1):
+        images.append(obs["image"])
+        scans.append(obs["scan"])
+        bins.append(obs["bins"])
+        poses.append(info["pose"])
+        times.append(info["time"])
+        if step == config.max_steps:
+            break
+        action = policy.act(obs)
+        actions.append(action)
+        obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
+        if terminated or truncated:
+            end_reason = info["end_reason"]
+            images.append(obs["image"])
+            scans.append(obs["scan"])
+            bins.append(obs["bins"])
+            poses.append(info["pose"])
+            times.append(info["time"])
+            break
+    actions.append(np.nan)
+    meta = RunMeta(
+        split=split,
+        index=index,
+        canyon_split=split,
+        canyon_index=index,
+        canyon_seed=int(canyon.seed_sequence.generate_state(1)[0]),
+        policy_seed=policy_seed,
+        end_reason=end_reason,
+        n_frames=len(images),
+    )
+    return Run(
+        meta=meta,
+        images=np.stack(images),
+        scans=np.stack(scans),
+        bins=np.stack(bins),
+        actions=np.asarray(actions, np.float32),
+        poses=np.asarray(poses, np.float32),
+        times=np.asarray(times, np.float32),
+    )
+
+
+def _worker(config: CollectConfig, seed: int, root: str, tasks, results) -> None:
+    """Collect and write runs from the task queue; the parent alone writes the manifest."""
+    env = CanyonEnv(config.env)
+    dataset_paths = Path(root)
+    try:
+        while (task := tasks.get()) is not None:
+            split, index = task
+            run = collect_run(env, config, seed, split, index)
+            path = dataset_paths / "runs" / f"{run.meta.name}.h5"
+            info = write_run(path, run, config.data.jpeg_quality)
+            results.put((to_dict(run.meta), info.sha256, info.bytes))
+    finally:
+        env.close()
+
+
+def collect(
+    out: Path,
+    config: CollectConfig,
+    seed: int,
+    workers: int = 1,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Dataset:
+    """Collect until each split holds `runs` / `val_runs` usable runs with no gap; resume what is there.
+
+    Runs shorter than `data.min_frames` are kept on disk but do not count, so run indices continue
+    past `runs` until the split has enough usable ones (the same indices whatever the workers).
+    """
+    if workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
+    dataset = Dataset.create(Path(out), to_dict(config), seed, overwrite=overwrite)
+    wanted = {"train": config.runs, "val": config.val_runs}
+    bar = tqdm(
+        total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True
+    )
+    steps, start = 0, time.perf_counter()
+    try:
+        while todo := _missing(dataset, wanted, config.data.min_frames):
+            bar.n = sum(wanted.values()) - len(todo)
+            bar.refresh()
+            for meta, info in _run_all(todo, config, seed, dataset, workers):
+                dataset.add(meta, info)
+                steps += meta.n_frames
+                bar.update(1)
+                bar.set_postfix(steps_per_s=f"{steps / (time.perf_counter() - start):.0f}")
+    finally:
+        bar.close()
+    return dataset
+
+
+def _missing(dataset: Dataset, wanted: dict[str, int], min_frames: int) -> list[tuple[str, int]]:
+    """The next runs to collect: each split's lowest missing indices, enough to cover its deficit."""
+    todo = []
+    for split, n in wanted.items():
+        usable, index, deficit = 0, 0, []
+        while usable + len(deficit) < n:
+            if dataset.has(split, index):
+                usable += dataset.entry(split, index).n_frames >= min_frames
+            else:
+                deficit.append((split, index))
+            index += 1
+        todo += deficit
+    return todo
+
+
+def _run_all(
+    todo, config: CollectConfig, seed: int, dataset: Dataset, workers: int
+) -> Iterator[tuple[RunMeta, FileInfo]]:
+    if not todo:
+        return
+    if workers == 1:
+        env = CanyonEnv(config.env)
+        try:
+            for split, index in todo:
+                run = collect_run(env, config, seed, split, index)
+                yield run.meta, write_run(dataset.run_path(split, index), run, config.data.jpeg_quality)
+        finally:
+            env.close()
+        return
+    ctx = mp.get_context("spawn")  # EGL contexts do not survive a fork
+    tasks, results = ctx.Queue(), ctx.Queue()
+    for task in todo:
+        tasks.put(task)
+    procs = [
+        ctx.Process(target=_worker, args=(config, seed, str(dataset.root), tasks, results), daemon=True)
+        for _ in range(workers)
+    ]
+    for _ in procs:
+        tasks.put(None)
+    for p in procs:
+        p.start()
+    try:
+        for _ in todo:
+            meta, sha, size = _next_result(results, procs)
+            yield RunMeta(**meta), FileInfo(sha256=sha, bytes=size)
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+            p.join()
+
+
+def _next_result(results, procs) -> tuple:
+    """Wait for a finished run; fail instead of hanging when every worker has died."""
+    while True:
+        try:
+            return results.get(timeout=5)
+        except queue.Empty:
+            if not any(p.is_alive() for p in procs):
+                raise RuntimeError("all collection workers died; run the same command to resume") from None
