@@ -12,8 +12,9 @@ from depthq.errors import ConfigError
 BUILTIN = ("heuristic", "ou")
 
 
-def make_policy(spec: str, seed: int | None = None) -> Policy:
-    """`spec` is 'heuristic', 'ou' or the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder."""
+def make_policy(spec: str, seed: int | None = None, which: str = "best") -> Policy:
+    """`spec` is 'heuristic', 'ou' or the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
+    (`which` weights: 'best' validation or 'last')."""
     if spec == "heuristic":
         return DepthHeuristic()
     if spec == "ou":
@@ -22,5 +23,5 @@ def make_policy(spec: str, seed: int | None = None) -> Policy:
     if path.is_dir():
         from depthq.control.qnet_policy import QNetPolicy
 
-        return QNetPolicy.from_checkpoint(path)
-    raise ConfigError(f"unknown policy {spec!r}: expected one of {BUILTIN} or a checkpoint folder")
+        return QNetPolicy.from_checkpoint(path, which=which)
+    raise ConfigError(f"unknown policy {spec!r}: expected one of {BUILTIN} or an existing checkpoint folder")

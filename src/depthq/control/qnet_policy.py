@@ -1,0 +1,86 @@
+"""A policy extracted from a trained Depth-Q-Net or Coll-Q-Net: one trunk pass per frame, all
+candidate actions through the head in one batch, then the selection rule of SPEC §1.7."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from depthq.control.action_selection import select_coll_action, select_depth_action
+from depthq.control.policy import Observation
+from depthq.errors import ConfigError
+from depthq.nets.heads import QNet, probability
+from depthq.nets.trunk import preprocess
+
+DEFAULT_ACTIONS = (-1.0, 0.0, 1.0)
+
+
+class QNetPolicy:
+    """Greedy policy of a Q-net. `last_values` holds the latest per-action predictions (for Fig. 4):
+    (K, n_bins) depth bins for Depth-Q-Net, (K,) collision probabilities for Coll-Q-Net."""
+
+    def __init__(
+        self,
+        net: QNet,
+        kind: str,
+        actions: tuple[float, ...] = DEFAULT_ACTIONS,
+        input_size: int = 128,
+        name: str = "qnet",
+        source: str | None = None,
+    ) -> None:
+        if kind not in ("depth", "coll"):
+            raise ConfigError(f"unknown Q-net kind {kind!r}; expected 'depth' or 'coll'")
+        if not actions or any(not -1 <= a <= 1 for a in actions):
+            raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
+        self.net = net.eval()
+        self.kind = kind
+        self.actions = np.asarray(actions, np.float64)
+        self._actions_t = torch.tensor(actions, dtype=torch.float32)
+        self.input_size = input_size
+        self.name = name
+        self.source = source
+        self.last_values: np.ndarray | None = None
+
+    @classmethod
+    def from_checkpoint(
+        cls, folder: Path, which: str = "best", actions: tuple[float, ...] = DEFAULT_ACTIONS
+    ) -> QNetPolicy:
+        from depthq.train.checkpoint import load_qnet
+
+        net, config = load_qnet(Path(folder), which=which)
+        kind = config["train"]["model"]
+        return cls(
+            net,
+            kind,
+            actions,
+            input_size=int(config["train"]["input_size"]),
+            name=f"{'DQN' if kind == 'depth' else 'CQN'}:{Path(folder).name}",
+            source=str(folder),
+        )
+
+    def reset(self, seed: int | None = None) -> None:
+        """Stateless between frames."""
+
+    @torch.inference_mode()
+    def values(self, image: np.ndarray) -> np.ndarray:
+        """Per-action predictions for one uint8 frame (H, W, 3)."""
+        out = self.net.q_values(preprocess(image, self.input_size), self._actions_t)
+        return (probability(out) if self.kind == "coll" else out).numpy()
+
+    def act(self, obs: Observation) -> float:
+        self.last_values = self.values(obs["image"])
+        if self.kind == "depth":
+            return select_depth_action(self.last_values, self.actions)
+        return select_coll_action(self.last_values, self.actions)
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "policy": self.name,
+            "kind": self.kind,
+            "checkpoint": self.source,
+            "actions": self.actions.tolist(),
+            "input_size": self.input_size,
+        }

@@ -1,0 +1,232 @@
+"""Drive a policy once in each evaluation canyon; metrics, trajectories, maps (SPEC §1.8).
+
+Each canyon is driven in a worker process with one torch thread and sensor noise seeded by the
+canyon index, so the results are the same whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import multiprocessing as mp
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.errors import ConfigError
+from depthq.evaluate.metrics import SUCCESS_DISTANCE, distance_from_spawn, imitation_loss, summarize
+from depthq.sim.canyon import N_EVAL_CANYONS, CanyonId
+
+RUN_FIELDS = (
+    "canyon",
+    "distance",
+    "path_length",
+    "success",
+    "end_reason",
+    "steps",
+    "imitation_loss",
+    "decision_ms_median",
+)
+FIG4_STEPS = (5, 40, 80, 120)  # frames kept for the Fig. 4-style snapshot of the first canyon
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """How a policy is evaluated; stored in every summary."""
+
+    canyons: tuple[str, ...] = tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
+    time_limit_s: float = 45.0
+    seed: int = 0  # sensor noise: canyon i uses seed + i
+    which: str = "best"  # checkpoint weights to load
+
+    def __post_init__(self) -> None:
+        for c in self.canyons:
+            CanyonId.parse(c)
+        if not self.time_limit_s > 0:
+            raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
+        if self.which not in ("best", "last"):
+            raise ConfigError(f"--which must be 'best' or 'last', got {self.which!r}")
+
+
+def parse_canyon_set(text: str) -> tuple[str, ...]:
+    """'eval' (all 20), 'eval:0-4' (a range) or 'eval:2,7' (a list) → canyon ids."""
+    stream, _, which = text.partition(":")
+    if stream != "eval":
+        raise ConfigError(f"unknown canyon set {text!r}: evaluation uses 'eval', 'eval:0-4' or 'eval:2,7'")
+    if not which:
+        return tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
+    try:
+        if "-" in which:
+            lo, hi = (int(v) for v in which.split("-"))
+            indices = list(range(lo, hi + 1))
+        else:
+            indices = [int(v) for v in which.split(",")]
+    except ValueError:
+        raise ConfigError(f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4' or 'eval:2,7'") from None
+    if not indices:
+        raise ConfigError(f"canyon set {text!r} is empty")
+    return tuple(str(CanyonId("eval", i)) for i in indices)
+
+
+def drive(policy, env, expert, canyon: str, seed: int, keep_steps: tuple[int, ...] = ()) -> dict[str, Any]:
+    """One run: the policy drives, the expert is asked on the same observations."""
+    from depthq.sim.env import parse_canyon
+
+    obs, info = env.reset(seed=seed, options={"canyon": parse_canyon(canyon)})
+    policy.reset(seed)
+    poses, actions, expert_actions, ms, snaps = [info["pose"]], [], [], [], []
+    done, step = False, 0
+    while not done:
+        expert_actions.append(expert.act(obs))
+        t0 = time.perf_counter()
+        action = policy.act(obs)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        values = getattr(policy, "last_values", None)
+        before = obs
+        obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
+        if step in keep_steps and values is not None:
+            snaps.append(
+                {
+                    "step": step,
+                    "image": before["image"].copy(),
+                    "values": values.copy(),
+                    "true_bins": obs["bins"].copy(),
+                    "pose": poses[-1].copy(),
+                    "action": action,
+                }
+            )
+        actions.append(action)
+        poses.append(info["pose"])
+        done = terminated or truncated
+        step += 1
+    poses = np.asarray(poses)
+    distance = distance_from_spawn(poses)
+    return {
+        "canyon": canyon,
+        "distance": distance,
+        "path_length": info["path_length"],
+        "success": distance > SUCCESS_DISTANCE,
+        "end_reason": info["end_reason"],
+        "steps": step,
+        "imitation_loss": imitation_loss(np.array(actions), np.array(expert_actions)),
+        "decision_ms_median": float(np.median(ms)),
+        "poses": poses.astype(np.float32),
+        "actions": np.asarray(actions, np.float32),
+        "snapshots": snaps,
+    }
+
+
+def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
+    import torch
+
+    from depthq.control.heuristic import DepthHeuristic
+    from depthq.control.registry import make_policy
+    from depthq.sim.env import CanyonEnv, EnvConfig
+
+    torch.set_num_threads(1)  # same float sums in every process: results independent of W
+    policy = make_policy(policy_spec, seed=config.seed, which=config.which)
+    env, expert = CanyonEnv(EnvConfig(time_limit_s=config.time_limit_s)), DepthHeuristic()
+    try:
+        while (task := tasks.get()) is not None:
+            k, canyon = task
+            keep = FIG4_STEPS if k == 0 else ()
+            results.put(
+                (k, drive(policy, env, expert, canyon, config.seed + int(canyon.split(":")[1]), keep))
+            )
+    finally:
+        env.close()
+
+
+def evaluate(
+    policy_spec: str, out: Path, config: EvalConfig = EvalConfig(), workers: int = 2, progress: bool = True
+) -> dict[str, Any]:
+    """Evaluate `policy_spec` ('heuristic', 'ou' or a checkpoint folder) and write its files to `out`."""
+    if workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {workers}")
+    from depthq.control.registry import make_policy
+
+    description = make_policy(policy_spec, seed=config.seed, which=config.which).describe()  # fails early
+    ctx = mp.get_context("spawn")
+    tasks, results = ctx.Queue(), ctx.Queue()
+    for task in enumerate(config.canyons):
+        tasks.put(task)
+    workers = min(workers, len(config.canyons))
+    for _ in range(workers):
+        tasks.put(None)
+    procs = [
+        ctx.Process(target=_worker, args=(policy_spec, config, tasks, results), daemon=True)
+        for _ in range(workers)
+    ]
+    for p in procs:
+        p.start()
+    runs: dict[int, dict[str, Any]] = {}
+    start = time.perf_counter()
+    try:
+        with tqdm(
+            total=len(config.canyons),
+            desc=f"evaluate {Path(policy_spec).name}",
+            unit="canyon",
+            disable=not progress,
+            dynamic_ncols=True,
+        ) as bar:
+            while len(runs) < len(config.canyons):
+                k, run = _next(results, procs)
+                runs[k] = run
+                bar.update(1)
+                bar.set_postfix(success=sum(r["success"] for r in runs.values()))
+    finally:
+        for p in procs:
+            p.join(timeout=10)
+            if p.is_alive():
+                p.terminate()
+    ordered = [runs[k] for k in sorted(runs)]
+    summary = {
+        "policy": description,
+        "config": to_dict(config),
+        "provenance": provenance(),
+        "summary": summarize(ordered),
+        "runs": [{f: r[f] for f in RUN_FIELDS} for r in ordered],
+        "seconds": round(time.perf_counter() - start, 2),
+    }
+    _write(out, summary, ordered)
+    return summary
+
+
+def _next(results, procs):
+    import queue
+
+    while True:
+        try:
+            return results.get(timeout=5)
+        except queue.Empty:
+            if not any(p.is_alive() for p in procs):
+                raise RuntimeError("all evaluation workers died") from None
+
+
+def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]]) -> None:
+    """summary.json last: a folder with a summary is complete."""
+    from depthq.evaluate.figures import plot_fig4, plot_trajectories
+
+    out.mkdir(parents=True, exist_ok=True)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=RUN_FIELDS)
+    writer.writeheader()
+    writer.writerows(summary["runs"])
+    atomic_write_bytes(out / "runs.csv", text.getvalue().encode())
+    buf = io.BytesIO()
+    np.savez_compressed(
+        buf,
+        **{f"{r['canyon'].replace(':', '_')}_poses": r["poses"] for r in runs},
+        **{f"{r['canyon'].replace(':', '_')}_actions": r["actions"] for r in runs},
+    )
+    atomic_write_bytes(out / "trajectories.npz", buf.getvalue())
+    plot_trajectories(runs, out / "trajectories.png", title=summary["policy"]["policy"])
+    snaps = runs[0]["snapshots"]
+    if snaps:
+        plot_fig4(snaps, runs[0], summary["policy"], out / "fig4_qualitative.png")
+    write_json(out / "summary.json", summary)

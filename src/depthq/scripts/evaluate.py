@@ -1,0 +1,38 @@
+"""Evaluate a policy once in each evaluation canyon (Table I's online metrics)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("policy", help="'heuristic', 'ou' or a checkpoint folder")
+    p.add_argument("--canyons", default="eval", help="'eval' (all 20), 'eval:0-4' or 'eval:2,7'")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--time-limit", type=float, default=45.0, help="seconds per run")
+    p.add_argument("--which", default="best", help="checkpoint weights: best or last")
+    p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+
+
+def run(args: argparse.Namespace) -> int:
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+
+    config = EvalConfig(
+        canyons=parse_canyon_set(args.canyons), time_limit_s=args.time_limit, seed=args.seed, which=args.which
+    )
+    result = evaluate(args.policy, args.out, config, workers=args.workers)
+    s = result["summary"]
+    if args.json:
+        print(json.dumps({"policy": result["policy"]["policy"], **s, "seconds": result["seconds"]}))
+    else:
+        print(
+            f"{result['policy']['policy']}: {s['successes']}/{s['runs']} successes, distance "
+            f"{s['distance_mean']:.2f} ± {s['distance_std']:.2f} m, imitation loss "
+            f"{s['imitation_loss_mean']:.3f}, decision {s['decision_ms_median']:.2f} ms median; "
+            f"{result['seconds']:.0f} s; files in {args.out}"
+        )
+    return 0

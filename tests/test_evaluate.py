@@ -1,0 +1,100 @@
+"""Action selection, Table I metrics, and real evaluations in the evaluation canyons."""
+
+import json
+
+import numpy as np
+import pytest
+
+from depthq.cli import main
+from depthq.control.action_selection import depth_scores, select_coll_action, select_depth_action
+from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.metrics import distance_from_spawn, imitation_loss, path_length
+
+ACTIONS = np.array([-1.0, 0.0, 1.0])
+
+
+def test_depth_selection_maximises_the_nearest_predicted_obstacle():
+    pred = np.full((3, 26), 1.5)
+    pred[0, 3] = 0.4  # right turn predicts a close obstacle
+    pred[2, 10] = 0.9
+    pred[1, 20] = 0.6
+    assert select_depth_action(pred, ACTIONS) == 1.0
+
+
+def test_depth_selection_ignores_bins_predicted_as_zero():
+    pred = np.full((3, 26), 1.0)
+    pred[2, :5] = 0.0  # "no prediction", not "wall at 0 m"
+    pred[2, 5:] = 1.8
+    np.testing.assert_allclose(depth_scores(pred), [1.0, 1.0, 1.8])
+    assert select_depth_action(pred, ACTIONS) == 1.0
+    assert depth_scores(np.zeros((1, 26)))[0] == 0.0
+
+
+def test_ties_go_straight():
+    assert select_depth_action(np.ones((3, 26)), ACTIONS) == 0.0
+    assert select_coll_action(np.array([0.2, 0.2, 0.2]), ACTIONS) == 0.0
+    assert select_coll_action(np.array([0.1, 0.3, 0.1]), ACTIONS) == -1.0  # straight not among the best
+    assert select_coll_action(np.array([0.3, 0.2, 0.1]), ACTIONS) == 1.0
+
+
+def test_distance_is_the_furthest_straight_line_from_the_spawn():
+    poses = np.array([[0, 0, 0], [0, 3, 0], [4, 3, 0], [0, 1, 0]], float)
+    assert distance_from_spawn(poses) == pytest.approx(5.0)
+    assert path_length(poses) == pytest.approx(3 + 4 + np.hypot(4, 2))
+    assert imitation_loss(np.array([1.0, 0.0]), np.array([-1.0, 0.0])) == pytest.approx(2.0)
+
+
+def test_canyon_sets_parse_and_bad_ones_are_refused():
+    assert parse_canyon_set("eval")[-1] == "eval:19"
+    assert parse_canyon_set("eval:2-4") == ("eval:2", "eval:3", "eval:4")
+    assert parse_canyon_set("eval:7,1") == ("eval:7", "eval:1")
+    for bad in ("train", "eval:a", "eval:25"):
+        with pytest.raises(ConfigError):
+            parse_canyon_set(bad)
+
+
+@pytest.fixture(scope="module")
+def heuristic_eval(tmp_path_factory):
+    out = tmp_path_factory.mktemp("heuristic")
+    config = EvalConfig(canyons=("eval:0", "eval:1"), time_limit_s=6.0)
+    return out, evaluate("heuristic", out, config, workers=1, progress=False)
+
+
+def test_heuristic_evaluation_gives_sane_metrics_and_files(heuristic_eval):
+    out, result = heuristic_eval
+    runs = result["runs"]
+    assert [r["canyon"] for r in runs] == ["eval:0", "eval:1"]
+    for r in runs:  # 6 s at 0.5 m/s: about 3 m, no collision, the expert imitates itself
+        assert r["end_reason"] == "time_limit" and r["steps"] == 60
+        assert 2.7 < r["distance"] <= r["path_length"] <= 3.01
+        assert r["imitation_loss"] == 0.0 and not r["success"]
+    assert result["summary"]["successes"] == 0
+    saved = json.loads((out / "summary.json").read_text())
+    assert saved["summary"] == result["summary"]
+    assert (out / "runs.csv").read_text().count("\n") == 3
+    with np.load(out / "trajectories.npz", allow_pickle=False) as z:
+        assert z["eval_0_poses"].shape == (61, 3)
+    assert (out / "trajectories.png").stat().st_size > 1000
+
+
+def without_timing(runs: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
+
+
+def test_results_do_not_depend_on_the_number_of_workers(heuristic_eval, tmp_path):
+    config = EvalConfig(canyons=("eval:0", "eval:1"), time_limit_s=6.0)
+    two = evaluate("heuristic", tmp_path, config, workers=2, progress=False)
+    assert without_timing(two["runs"]) == without_timing(heuristic_eval[1]["runs"])
+    config = EvalConfig(canyons=("eval:3", "eval:4"), time_limit_s=8.0)
+    ou_one = evaluate("ou", tmp_path / "a", config, workers=1, progress=False)
+    ou_two = evaluate("ou", tmp_path / "b", config, workers=2, progress=False)
+    assert without_timing(ou_one["runs"]) == without_timing(ou_two["runs"])
+
+
+def test_cli_refuses_a_missing_checkpoint_and_an_unknown_canyon_set(tmp_path, capsys):
+    assert main(["evaluate", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "nope" in capsys.readouterr().err
+    assert main(["evaluate", "heuristic", "--canyons", "mars", "--out", str(tmp_path / "o")]) == 2
+    assert "mars" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
