@@ -155,6 +155,16 @@ def collect(
     return dataset
 
 
+def collection_complete(out: Path, config: CollectConfig) -> bool:
+    """Whether `out` already holds every run `config` asks for (then `collect` has nothing to do)."""
+    if not (Path(out) / "manifest.json").is_file():
+        return False
+    dataset = Dataset.open(Path(out))
+    if dataset.config != to_dict(config):
+        return False
+    return not _missing(dataset, {"train": config.runs, "val": config.val_runs}, config.data.min_frames)
+
+
 def _missing(dataset: Dataset, wanted: dict[str, int], min_frames: int) -> list[tuple[str, int]]:
     """The next runs to collect: each split's lowest missing indices, enough to cover its deficit."""
     todo = []

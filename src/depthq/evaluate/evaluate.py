@@ -185,11 +185,17 @@ def evaluate(
             if p.is_alive():
                 p.terminate()
     ordered = [runs[k] for k in sorted(runs)]
+    offline = None
+    if Path(policy_spec).is_dir():
+        from depthq.evaluate.offline import offline_metric
+
+        offline = offline_metric(Path(policy_spec), which=config.which)
     summary = {
         "policy": description,
         "config": to_dict(config),
         "provenance": provenance(),
         "summary": summarize(ordered),
+        **({"offline": offline} if offline else {}),
         "runs": [{f: r[f] for f in RUN_FIELDS} for r in ordered],
         "seconds": round(time.perf_counter() - start, 2),
     }

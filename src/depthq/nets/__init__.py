@@ -1,1 +1,1 @@
-"""Networks: image trunks (EfficientNet-Lite0, MobileNet-v1-0.25), the Depth-Q and Coll-Q heads, losses, optimizer."""
+"""Networks: image trunks, the Depth-Q-Net and Coll-Q-Net heads, their losses and optimizer."""

@@ -64,7 +64,10 @@ def same_padding(size: int, kernel: int, stride: int) -> tuple[int, int]:
 
 
 class Conv2dSame(nn.Conv2d):
-    """Bias-free conv with TensorFlow "SAME" padding computed from the input size at each call."""
+    """Conv with TensorFlow "SAME" padding computed from the input size at each call.
+
+    Built bias-free, as in the weights file; `fold_batchnorm` gives it a bias.
+    """
 
     def __init__(self, in_ch: int, out_ch: int, kernel: int, stride: int = 1, groups: int = 1) -> None:
         super().__init__(in_ch, out_ch, kernel, stride=stride, groups=groups, bias=False)

@@ -41,9 +41,11 @@ class HeadConfig:
         if self.kind not in HEAD_KINDS:
             raise ConfigError(f"HeadConfig.kind must be one of {HEAD_KINDS}, got {self.kind!r}")
         for name in ("feature_dim", "hidden", "n_bins"):
-            if not _positive_int(getattr(self, name)):
-                raise ConfigError(f"HeadConfig.{name} must be a positive integer, got {getattr(self, name)!r}")
-        if isinstance(self.dropout, bool) or not isinstance(self.dropout, int | float) or not 0 <= self.dropout < 1:
+            value = getattr(self, name)
+            if not _positive_int(value):
+                raise ConfigError(f"HeadConfig.{name} must be a positive integer, got {value!r}")
+        dropout = self.dropout
+        if isinstance(dropout, bool) or not isinstance(dropout, int | float) or not 0 <= dropout < 1:
             raise ConfigError(f"HeadConfig.dropout must be in [0, 1), got {self.dropout!r}")
 
 

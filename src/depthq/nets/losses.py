@@ -28,7 +28,9 @@ def depth_l1_loss(
     has none. A batch with no valid bin gives 0 (with a graph, so `backward` still works).
     """
     if pred.ndim != 2 or pred.shape != target.shape:
-        raise ConfigError(f"depth_l1_loss: pred {tuple(pred.shape)} and target {tuple(target.shape)} must be (B, bins)")
+        raise ConfigError(
+            f"depth_l1_loss: pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, bins)"
+        )
     valid = depth_valid_mask(target, clip)
     # Zero the invalid targets before subtracting: a NaN would poison the gradient even where masked.
     errors = torch.where(valid, (pred - torch.where(valid, target, 0.0)).abs(), 0.0)
@@ -40,6 +42,8 @@ def depth_l1_loss(
 def coll_bce_loss(logits: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Binary cross-entropy on logits (stable for any logit) → (mean, per-sample (B,))."""
     if logits.ndim != 1 or logits.shape != target.shape:
-        raise ConfigError(f"coll_bce_loss: logits {tuple(logits.shape)} and target {tuple(target.shape)} must be (B,)")
+        raise ConfigError(
+            f"coll_bce_loss: logits {tuple(logits.shape)} and target {tuple(target.shape)} must both be (B,)"
+        )
     per_sample = F.binary_cross_entropy_with_logits(logits, target.to(logits.dtype), reduction="none")
     return per_sample.mean(), per_sample

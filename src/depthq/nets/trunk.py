@@ -26,7 +26,11 @@ FROZEN_MICRO_BATCH = 16
 
 
 class Trunk(nn.Module):
-    """A named image → feature network; a frozen one stays in eval mode and has no trainable parameters."""
+    """A named image → feature network.
+
+    A frozen one stays in eval mode, has no trainable parameters, and runs for speed: BatchNorm
+    folded (see `fold_batchnorm`), channels-last, in micro-batches of FROZEN_MICRO_BATCH frames.
+    """
 
     def __init__(self, name: str, net: nn.Module, feature_dim: int, frozen: bool) -> None:
         super().__init__()

@@ -1,0 +1,92 @@
+"""Write every table, figure and the HTML report of a reproduction folder from its files."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict
+from depthq.data import DataConfig
+from depthq.data.manifest import Dataset
+from depthq.data.stats import dataset_stats
+from depthq.report import html as page
+from depthq.report.figures import plot_fig5, plot_success_vs_runs
+from depthq.report.presets import Preset
+from depthq.report.tables import csv_text, markdown, reference_rows, table1_rows, table2_rows
+
+
+def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
+    """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4)."""
+    from depthq.report.reproduce import model_name
+
+    best, best_distance = None, -1.0
+    for n in preset.subsets:
+        for s in preset.seeds:
+            path = out / "eval" / model_name("depth", n, s) / "summary.json"
+            if path.is_file() and (d := read_json(path)["summary"]["distance_mean"]) > best_distance:
+                best, best_distance = path.parent, d
+    return best
+
+
+def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> None:
+    t1 = table1_rows(out, preset.subsets, preset.seeds)
+    refs = reference_rows(out)
+    stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=preset.subsets))
+    t2 = table2_rows(stats, preset.subsets)
+    note = (
+        f"mean (std) over {len(preset.seeds)} seed(s); {preset.canyons} canyons, {preset.time_limit_s:.0f} s "
+        f"per run; success = more than 15 m from the spawn. Trunk: EfficientNet-Lite0 (frozen) instead of "
+        f"the paper's MobileNet-v1-0.25.\n"
+    )
+    atomic_write_bytes(
+        out / "table1.md",
+        (
+            "# Table I\n\n" + note + "\n" + markdown(t1) + "\n## Reference policies "
+            "(mean (std) over canyons)\n\n" + markdown(refs)
+        ).encode(),
+    )
+    atomic_write_bytes(out / "table1.csv", csv_text(t1).encode())
+    atomic_write_bytes(out / "table2.md", ("# Table II\n\n" + markdown(t2)).encode())
+    plot_fig5(out, preset.subsets, preset.seeds, out / "fig5_convergence.png")
+    plot_success_vs_runs(out, preset.subsets, preset.seeds, out / "success_vs_runs.png")
+    best = _best_depth_eval(out, preset)
+    if best is not None and (best / "fig4_qualitative.png").is_file():
+        shutil.copyfile(best / "fig4_qualitative.png", out / "fig4_qualitative.png")
+    figures = [
+        (out / "eval" / name / "trajectories.png", f"trajectories: {name}") for name in ("heuristic", "ou")
+    ]
+    if best is not None:
+        figures.append((best / "trajectories.png", f"trajectories: {best.name} (best Depth-Q-Net)"))
+    html_text = page.render(
+        f"depthq reproduction — preset {preset.name}",
+        [
+            (
+                "Table I",
+                f"<p>{note}</p>" + page._table(t1) + "<h3>Reference policies</h3>" + page._table(refs),
+            ),
+            ("Success rate against training runs", page._img(out / "success_vs_runs.png", "success vs runs")),
+            ("Table II", page._table(t2)),
+            ("Fig. 4: Depth-Q-Net predictions", page._img(out / "fig4_qualitative.png", "Fig. 4")),
+            ("Fig. 5: convergence", page._img(out / "fig5_convergence.png", "Fig. 5")),
+            ("Trajectories", "".join(page._img(p, alt) for p, alt in figures)),
+            (
+                "Deviations from the paper",
+                page._table([{"original": o, "ours": w, "why": y} for o, w, y in page.DEVIATIONS]),
+            ),
+            (
+                "Measured stage times (s)",
+                page._table([{"stage": k, "seconds": f"{v:.1f}"} for k, v in stage_seconds.items()]),
+            ),
+            (
+                "Configuration",
+                page.pre(
+                    {
+                        "preset": to_dict(preset),
+                        "provenance": provenance(),
+                        "dataset": {k: stats[k] for k in ("collected", "usable", "frames", "kb_per_frame")},
+                    }
+                ),
+            ),
+        ],
+    )
+    atomic_write_bytes(out / "report.html", html_text.encode())

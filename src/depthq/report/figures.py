@@ -1,0 +1,79 @@
+"""Fig. 5 (convergence) and the success-rate-vs-data plot, from checkpoint logs and evaluations."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from depthq.report.tables import NET_LABELS, collect_results
+
+
+def _read_metrics(path: Path) -> dict[str, np.ndarray]:
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]} if rows else {}
+
+
+def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path: Path) -> None:
+    """Training and validation loss per epoch for each subset size, with the validation std band
+    (the paper's over-fitting signal), averaged over seeds."""
+    from depthq.report.reproduce import model_name
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(subsets)))
+    for ax, net in zip(axes, ("depth", "coll"), strict=True):
+        for colour, n in zip(colours, subsets, strict=True):
+            logs = [
+                _read_metrics(p)
+                for s in seeds
+                if (p := out / "models" / model_name(net, n, s) / "metrics.csv").is_file()
+            ]
+            logs = [m for m in logs if m]
+            if not logs:
+                continue
+            e = min(len(m["epoch"]) for m in logs)
+            epoch = logs[0]["epoch"][:e]
+            train = np.mean([m["train_loss"][:e] for m in logs], axis=0)
+            val = np.mean([m["val_loss"][:e] for m in logs], axis=0)
+            std = np.mean([m["val_loss_std"][:e] for m in logs], axis=0)
+            ax.plot(epoch, train, "--", color=colour, lw=1, label=f"{n} runs, train")
+            ax.plot(epoch, val, "-", color=colour, lw=1.5, label=f"{n} runs, validation")
+            ax.fill_between(epoch, val - std, val + std, color=colour, alpha=0.15)
+        ax.set_title(f"{NET_LABELS[net]}: {'L1 on valid bins (m)' if net == 'depth' else 'cross-entropy'}")
+        ax.set_xlabel("epoch (100 training batches of 64)")
+        ax.set_ylabel("loss")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_success_vs_runs(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path: Path) -> None:
+    """The paper's claim at a glance: successes out of the evaluation canyons against training runs."""
+    results = collect_results(out, subsets, seeds)
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for net, colour in (("depth", "tab:blue"), ("coll", "tab:orange")):
+        xs, mean, std = [], [], []
+        for n in subsets:
+            succ = [r["summary"]["successes"] for r in results[f"{net}_{n}"]]
+            if succ:
+                xs.append(n)
+                mean.append(np.mean(succ))
+                std.append(np.std(succ))
+        if xs:
+            ax.errorbar(xs, mean, yerr=std, marker="o", capsize=3, color=colour, label=NET_LABELS[net])
+    ax.set_xlabel("training runs")
+    ax.set_ylabel("successes (distance > 15 m)")
+    ax.set_xscale("log")
+    ax.set_xticks(list(subsets), [str(n) for n in subsets])
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

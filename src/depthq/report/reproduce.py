@@ -1,0 +1,164 @@
+"""`depthq reproduce`: collect → train every (network, subset, seed) → evaluate → tables, figures, report.
+
+Output folder:
+
+    OUT/reproduce.json            the preset and package version this folder belongs to
+    OUT/data/                     the dataset (see README "Dataset on disk") and its feature cache
+    OUT/models/<net>_n<N>_s<S>/   checkpoints, e.g. models/depth_n200_s1 (see depthq.train.checkpoint)
+    OUT/eval/<name>/              evaluations: summary.json, runs.csv, trajectories (+ heuristic, ou)
+    OUT/stages.json               measured seconds of every stage
+    OUT/table1.md|csv, table2.md, fig4_qualitative.png, fig5_convergence.png, success_vs_runs.png,
+    OUT/report.html               the results, all generated from the runs above
+
+Every stage is skipped when its output is complete (a dataset with all its runs, a checkpoint at
+its last epoch, an evaluation with its summary.json) and redone otherwise, so running the same
+command again after an interruption resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from depthq.configio import provenance, read_json, to_dict, write_json
+from depthq.errors import ConfigError
+from depthq.report.presets import Preset, get_preset
+
+NETS = ("depth", "coll")
+TRUNK, INPUT_SIZE = "efficientnet_lite0", 128
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    done: Callable[[], bool]
+    run: Callable[[], object]
+
+
+def model_name(net: str, runs: int, seed: int) -> str:
+    return f"{net}_n{runs}_s{seed}"
+
+
+def _eval_done(folder: Path) -> bool:
+    return (folder / "summary.json").is_file()
+
+
+def build_stages(preset: Preset, out: Path) -> list[Stage]:
+    """The pipeline as an ordered list of resumable stages."""
+    from depthq.data.collect import CollectConfig, collect, collection_complete
+    from depthq.data.manifest import Dataset
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.train.checkpoint import saved_epoch
+    from depthq.train.config import TrainConfig
+    from depthq.train.features import features_ready, load_features
+    from depthq.train.trainer import train
+
+    data = out / "data"
+    collect_config = CollectConfig(runs=preset.runs, val_runs=preset.val_runs, max_steps=preset.max_steps)
+    eval_config = EvalConfig(canyons=parse_canyon_set(preset.canyons), time_limit_s=preset.time_limit_s)
+    stages = [
+        Stage(
+            "collect",
+            lambda: collection_complete(data, collect_config),
+            lambda: collect(data, collect_config, seed=0, workers=preset.workers),
+        ),
+        Stage(
+            "features",
+            lambda: features_ready(Dataset.open(data), TRUNK, INPUT_SIZE),
+            lambda: load_features(Dataset.open(data), TRUNK, INPUT_SIZE),
+        ),
+    ]
+    for ref in ("heuristic", "ou"):
+        folder = out / "eval" / ref
+        stages.append(
+            Stage(
+                f"evaluate {ref}",
+                lambda f=folder: _eval_done(f),
+                lambda r=ref, f=folder: evaluate(r, f, eval_config, preset.workers),
+            )
+        )
+    for n in preset.subsets:
+        for seed in preset.seeds:
+            for net in NETS:
+                name = model_name(net, n, seed)
+                extra = {} if preset.epochs is None else {"epochs": preset.epochs}
+                config = TrainConfig(
+                    model=net,
+                    data=str(data),
+                    runs=n,
+                    seed=seed,
+                    train_batches=preset.train_batches,
+                    val_batches=preset.val_batches,
+                    **extra,
+                )
+                ckpt, ev = out / "models" / name, out / "eval" / name
+                stages.append(
+                    Stage(
+                        f"train {name}",
+                        lambda c=config, f=ckpt: saved_epoch(f) >= c.epochs,
+                        lambda c=config, f=ckpt: train(c, f),
+                    )
+                )
+                stages.append(
+                    Stage(
+                        f"evaluate {name}",
+                        lambda f=ev: _eval_done(f),
+                        lambda f=ev, c=ckpt: evaluate(str(c), f, eval_config, preset.workers),
+                    )
+                )
+    return stages
+
+
+def _claim(out: Path, preset: Preset) -> None:
+    """Refuse a folder holding another preset's results; mark a new one as this preset's."""
+    marker = out / "reproduce.json"
+    if marker.is_file():
+        held = read_json(marker).get("preset", {})
+        if held != json.loads(json.dumps(to_dict(preset))):
+            raise ConfigError(
+                f"{out} holds results of preset {held.get('name')!r} with another configuration; "
+                f"use another --out for preset {preset.name!r}"
+            )
+    elif out.exists() and any(out.iterdir()):
+        raise ConfigError(f"{out} exists and is not a depthq reproduce folder; use another --out")
+    write_json(marker, {"preset": to_dict(preset), "provenance": provenance()})
+
+
+def reproduce(preset_name: str, out: Path, progress: bool = True) -> dict[str, float]:
+    """Run (or resume) the whole pipeline; returns the measured seconds per stage."""
+    from depthq.report.build import build_report
+
+    preset = get_preset(preset_name)
+    out = Path(out)
+    _claim(out, preset)
+    times_path = out / "stages.json"
+    times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
+    stages = build_stages(preset, out)
+    with tqdm(
+        total=len(stages),
+        desc=f"reproduce {preset.name}",
+        unit="stage",
+        position=0,
+        disable=not progress,
+        dynamic_ncols=True,
+    ) as bar:
+        for stage in stages:
+            if stage.done():
+                bar.update(1)
+                continue
+            bar.set_postfix_str(stage.name)
+            start = time.perf_counter()
+            stage.run()
+            times[stage.name] = round(time.perf_counter() - start, 1)
+            write_json(times_path, times)
+            bar.update(1)
+    start = time.perf_counter()
+    build_report(out, preset, times)
+    times["report"] = round(time.perf_counter() - start, 1)
+    write_json(times_path, times)
+    return times

@@ -1,0 +1,108 @@
+"""Table I and Table II from the files a reproduction wrote (never from hand-written numbers)."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from depthq.configio import read_json
+
+NET_LABELS = {"coll": "CQN", "depth": "DQN"}
+
+
+def _mean_std(values: list[float], fmt: str) -> str:
+    if not values:
+        return "–"
+    return f"{np.mean(values):{fmt}} ({np.std(values):{fmt}})"
+
+
+def collect_results(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> dict[str, Any]:
+    """Per (net, n): the per-seed summaries of the evaluations that exist."""
+    from depthq.report.reproduce import NETS, model_name
+
+    results: dict[str, Any] = {}
+    for n in subsets:
+        for net in NETS:
+            per_seed = []
+            for seed in seeds:
+                path = out / "eval" / model_name(net, n, seed) / "summary.json"
+                if path.is_file():
+                    per_seed.append(read_json(path))
+            results[f"{net}_{n}"] = per_seed
+    return results
+
+
+def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> list[dict[str, str]]:
+    """The paper's Table I columns, mean (std) over seeds, one row per training-set size."""
+    results = collect_results(out, subsets, seeds)
+    rows = []
+    for n in subsets:
+        row = {"runs": str(n)}
+        for net in ("coll", "depth"):
+            runs = results[f"{net}_{n}"]
+            label = NET_LABELS[net]
+            row[f"distance {label}"] = _mean_std([r["summary"]["distance_mean"] for r in runs], ".2f")
+            row[f"success {label}"] = _mean_std([r["summary"]["successes"] for r in runs], ".1f")
+            row[f"imitation {label}"] = _mean_std([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
+            row[f"seeds {label}"] = str(len(runs))
+        coll, depth = results[f"coll_{n}"], results[f"depth_{n}"]
+        row["cross-entropy CQN"] = _mean_std([r["offline"]["value"] for r in coll if "offline" in r], ".3f")
+        row["abs diff DQN"] = _mean_std([r["offline"]["value"] for r in depth if "offline" in r], ".3f")
+        rows.append(row)
+    return rows
+
+
+def reference_rows(out: Path) -> list[dict[str, str]]:
+    """The heuristic expert and OU exploration: mean (std) over canyons."""
+    rows = []
+    for ref in ("heuristic", "ou"):
+        path = out / "eval" / ref / "summary.json"
+        if path.is_file():
+            s = read_json(path)["summary"]
+            rows.append(
+                {
+                    "policy": ref,
+                    "distance": f"{s['distance_mean']:.2f} ({s['distance_std']:.2f})",
+                    "success": f"{s['successes']}/{s['runs']}",
+                    "imitation": f"{s['imitation_loss_mean']:.3f} ({s['imitation_loss_std']:.3f})",
+                }
+            )
+    return rows
+
+
+def markdown(rows: list[dict[str, str]]) -> str:
+    if not rows:
+        return "(no rows)\n"
+    head = list(rows[0])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(r[h] for h in head) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def csv_text(rows: list[dict[str, str]]) -> str:
+    text = io.StringIO()
+    if rows:
+        writer = csv.DictWriter(text, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return text.getvalue()
+
+
+def table2_rows(stats: dict[str, Any], subsets: tuple[int, ...]) -> list[dict[str, str]]:
+    """Table II: runs, samples and samples without collision frames per subset."""
+    wanted = {str(n) for n in subsets} | {"val"}
+    return [
+        {
+            "runs": row["subset"],
+            "samples (CQN)": str(row["samples"]),
+            "samples without collision (DQN)": str(row["samples_without_collision"]),
+            "mean run length": f"{row['mean_run_length']:.1f}",
+            "ended in collision": f"{row['collision_fraction']:.0%}",
+        }
+        for row in stats["table"]
+        if row["subset"] in wanted
+    ]

@@ -1,0 +1,7 @@
+"""Off-policy training of Depth-Q-Net and Coll-Q-Net from one collected dataset (SPEC §1.6).
+
+Modules, one concept each: `config` (every hyper-parameter, `TrainConfig`), `features` (the
+on-disk cache of frozen-trunk features), `samples` (training batches from cached features or from
+images), `checkpoint` (the output folder: weights, resume state, metrics; `load_qnet`), `trainer`
+(the loop, `train`), `bench` (speed of head training and of feature extraction).
+"""

@@ -1,0 +1,117 @@
+"""Speed of the two halves of training (SPEC §4): head training on cached features, and feature
+extraction end to end (JPEG decode + resize + frozen trunk)."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from depthq.data.manifest import Dataset
+from depthq.nets.heads import QNet, build_head
+from depthq.nets.losses import depth_l1_loss
+from depthq.nets.optim import make_optimizer
+from depthq.nets.trunk import build_trunk
+from depthq.train.adadelta import blocked
+from depthq.train.checkpoint import head_config
+from depthq.train.config import TrainConfig
+from depthq.train.features import BATCH as DECODE_BATCH
+from depthq.train.features import FeatureTable, frame_batches, prefetch
+from depthq.train.samples import FeatureSamples
+from depthq.train.trainer import train_step
+
+BATCH = 64
+POOL = 8192  # cached-feature-like rows to draw batches from
+
+
+def bench_train(seconds: float = 10.0) -> dict[str, float]:
+    """Depth-Q-Net head training samples/s (batch 64, 1280-d features, 4096 hidden, Adadelta) and its
+    FLOP/s as a fraction of what `torch.matmul` reaches on the head's largest GEMM in the same run.
+
+    Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); the hidden layer's input
+    gradient is never computed (features need none), so `ratio_actual` counts the work really done.
+    """
+    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_flush_denormal(True)  # as `train` does
+    torch.manual_seed(0)
+    config = TrainConfig(model="depth", data="-")
+    head = head_config(config)
+    model = QNet(build_trunk(config.trunk, pretrained=False), build_head(head))
+    optimizer = blocked(make_optimizer(model, config.learning_rate, config.weight_decay))
+    rng = np.random.default_rng(0)
+    arrays = {
+        "run_offsets": np.array([0, POOL]),
+        "run_id": np.zeros(POOL, dtype=np.int64),
+        "frame_id": np.arange(POOL),
+        "action": rng.uniform(-1, 1, POOL).astype(np.float32),
+        "target": rng.uniform(0.2, 2.5, (POOL, head.n_bins)).astype(np.float32),
+    }
+    features = rng.uniform(0, 6, (POOL, head.feature_dim)).astype(np.float16)
+    samples = FeatureSamples(arrays, FeatureTable(features, {"train_000000": (0, POOL)}, False), "train")
+    x = torch.rand(BATCH, head.feature_dim + 1)
+    w = torch.rand(head.feature_dim + 1, head.hidden)
+
+    def head_steps() -> None:
+        train_step(model, samples, samples.batch(samples.draw(BATCH, rng)), depth_l1_loss, optimizer)
+
+    def matmul() -> None:
+        torch.matmul(x, w)
+
+    model.train()
+    head_s = matmul_s = 0.0
+    head_n = matmul_n = 0
+    for _ in range(3):  # warm-up
+        head_steps()
+        matmul()
+    rounds = max(1, round(seconds))
+    for _ in range(rounds):  # alternate, so both see the same machine load
+        n, dt = _timed(head_steps, 0.75 * seconds / rounds)
+        head_n, head_s = head_n + n, head_s + dt
+        n, dt = _timed(matmul, 0.25 * seconds / rounds)
+        matmul_n, matmul_s = matmul_n + n, matmul_s + dt
+    d, h, k = head.feature_dim + 1, head.hidden, head.n_bins
+    forward = 2 * (d * h + h * k)  # FLOPs per sample
+    actual = 2 * 2 * d * h + 3 * 2 * h * k
+    samples_per_s = head_n * BATCH / head_s
+    matmul_flops = matmul_n * 2 * BATCH * d * h / matmul_s
+    return {
+        "threads": torch.get_num_threads(),
+        "samples_per_s": round(samples_per_s, 1),
+        "steps_per_s": round(head_n / head_s, 2),
+        "head_gflops": round(3 * forward * samples_per_s / 1e9, 2),
+        "matmul_gflops": round(matmul_flops / 1e9, 2),
+        "ratio": round(3 * forward * samples_per_s / matmul_flops, 3),
+        "ratio_actual": round(actual * samples_per_s / matmul_flops, 3),
+        "seconds": round(head_s + matmul_s, 2),
+    }
+
+
+def bench_features(data: Path, n: int = 512, size: int = 128, trunk: str = "efficientnet_lite0") -> dict:
+    """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
+    resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
+    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    dataset = Dataset.open(Path(data))
+    net = build_trunk(trunk)
+    frames = 0
+    with torch.inference_mode():
+        net(torch.rand(16, 3, size, size))  # warm-up
+        start = time.perf_counter()
+        for batch in prefetch(itertools.islice(frame_batches(dataset, size), -(-n // DECODE_BATCH)), depth=2):
+            net(batch)
+            frames += len(batch)
+        seconds = time.perf_counter() - start
+    return {"trunk": trunk, "input_size": size, "frames": frames, "seconds": round(seconds, 2),
+            "frames_per_s": round(frames / seconds, 1), "threads": torch.get_num_threads()}
+
+
+def _timed(fn, seconds: float) -> tuple[int, float]:
+    """Calls of `fn` in about `seconds`, and the time they took."""
+    n, start = 0, time.perf_counter()
+    while (elapsed := time.perf_counter() - start) < seconds or n == 0:
+        fn()
+        n += 1
+    return n, elapsed

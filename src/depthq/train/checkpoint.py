@@ -1,0 +1,257 @@
+"""A training output folder: what was trained, its weights, its metrics, and how to resume it.
+
+Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename):
+
+    config.json              format, provenance (package version), `train` (the full TrainConfig),
+                             `head` (HeadConfig), trunk, trunk_frozen, input_size, learning_rate,
+                             data_fingerprint (`depthq.train.features.dataset_fingerprint`)
+    best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*"),
+    last.safetensors         and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
+                             stored, it is rebuilt from the package's pretrained weights
+    best.json, last.json     epoch and metrics of those weights
+    metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
+    last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
+                             ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
+                             ("rng.torch"), and in its metadata the epoch, the NumPy sampling
+                             generator's state, the metrics history and the best epoch
+    last_state.json          a readable copy of that metadata (never read back)
+    tb/                      TensorBoard event files (a log: appended, purged of stale epochs on resume)
+
+Weights are safetensors, never pickles. `load_qnet` rebuilds a network from this folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors import SafetensorError, safe_open
+from safetensors.torch import save as save_safetensors
+
+from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
+from depthq.errors import ConfigError, DataError
+from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
+from depthq.nets.trunk import TRUNKS, build_trunk
+from depthq.train.config import TrainConfig
+
+CONFIG = "config.json"
+STATE = "last_state.safetensors"
+METRICS = "metrics.csv"
+FORMAT = "depthq-checkpoint"
+FORMAT_VERSION = 1
+METRIC_FIELDS = ("epoch", "train_loss", "val_loss", "val_loss_std", "seconds")
+WHICH = ("best", "last")
+
+
+@dataclass
+class TrainState:
+    """Where training stands after `epoch` epochs: one row per epoch, and the best one so far."""
+
+    epoch: int = 0
+    history: list[dict[str, float]] = field(default_factory=list)
+    best: dict[str, float] | None = None
+
+
+def head_config(config: TrainConfig) -> HeadConfig:
+    return HeadConfig(config.model, TRUNKS[config.trunk].feature_dim, dropout=config.dropout)
+
+
+def build_qnet(config: TrainConfig) -> QNet:
+    """The network `config` trains: its trunk (pretrained if it has weights) and a fresh head."""
+    return QNet(build_trunk(config.trunk), build_head(head_config(config)))
+
+
+def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
+    """The weights a checkpoint stores: the head's, plus the trunk's when it is trained."""
+    parts = [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
+    return {f"{name}.{k}": t.detach().contiguous() for name, m in parts for k, t in m.state_dict().items()}
+
+
+def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Path) -> None:
+    parts = [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
+    try:
+        for name, module in parts:
+            prefix = f"{name}."
+            module.load_state_dict({k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)})
+    except RuntimeError as err:
+        raise ConfigError(f"{path}: weights do not fit the network of its config.json ({err})") from err
+
+
+# --- starting and resuming -------------------------------------------------------------------------
+
+
+def config_record(config: TrainConfig, fingerprint: str) -> dict[str, Any]:
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "provenance": provenance(),
+        "train": to_dict(config),
+        "head": to_dict(head_config(config)),
+        "trunk": config.trunk,
+        "trunk_frozen": TRUNKS[config.trunk].frozen,
+        "input_size": config.input_size,
+        "learning_rate": config.learning_rate,
+        "data_fingerprint": fingerprint,
+    }
+
+
+def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
+    """Whether `out` already holds this training (True: resume it) or is free (False).
+
+    The same training means the same config but for `epochs` (a run may be extended) and `data`
+    (the folder may move; its content is compared by fingerprint). Anything else → ConfigError.
+    """
+    if not out.exists():
+        return False
+    if not out.is_dir():
+        raise ConfigError(f"--out {out}: exists and is not a folder")
+    if not (out / CONFIG).is_file():
+        if any(out.iterdir()):
+            raise ConfigError(f"--out {out}: exists, is not empty and holds no training ({CONFIG} missing)")
+        return False
+    old = _read_config(out)
+    ignore = {"epochs", "data"}
+    old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
+    new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
+    differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
+    if old.get("data_fingerprint") != fingerprint:
+        differing.append("data (the dataset's runs changed)")
+    if differing:
+        raise ConfigError(
+            f"--out {out} holds a training with a different configuration (differs in: "
+            f"{', '.join(differing)}); use another folder"
+        )
+    return True
+
+
+def write_config(out: Path, config: TrainConfig, fingerprint: str) -> None:
+    write_json(out / CONFIG, config_record(config, fingerprint))
+
+
+def save_epoch(
+    out: Path,
+    model: QNet,
+    optimizer: torch.optim.Optimizer,
+    rng: np.random.Generator,
+    state: TrainState,
+    is_best: bool,
+) -> None:
+    """Write the epoch's checkpoint: resume state first (one file), then the weights, metrics and logs."""
+    weights = trainable_state(model)
+    optim = optimizer.state_dict()
+    tensors = {f"model.{k}": v for k, v in weights.items()}
+    for param, values in optim["state"].items():
+        tensors.update({f"optim.{param}.{key}": torch.as_tensor(v).clone() for key, v in values.items()})
+    tensors["rng.torch"] = torch.get_rng_state()
+    meta = {
+        "epoch": state.epoch,
+        "rng": rng.bit_generator.state,
+        "history": state.history,
+        "best": state.best,
+        "param_groups": optim["param_groups"],
+    }
+    atomic_write_bytes(out / STATE, save_safetensors(tensors, metadata={"state": json.dumps(meta)}))
+    write_json(out / "last_state.json", meta)
+    blob = save_safetensors(weights, metadata={"epoch": str(state.epoch)})
+    atomic_write_bytes(out / "last.safetensors", blob)
+    write_json(out / "last.json", state.history[-1])
+    if is_best:
+        atomic_write_bytes(out / "best.safetensors", blob)
+        write_json(out / "best.json", state.history[-1])
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(state.history)
+    atomic_write_bytes(out / METRICS, text.getvalue().encode())
+
+
+def saved_epoch(out: Path) -> int:
+    """Epochs finished in `out`: the epoch of its resume state, 0 if it has none."""
+    path = out / STATE
+    if not path.is_file():
+        return 0
+    try:
+        with safe_open(path, framework="pt") as f:
+            return int(json.loads((f.metadata() or {})["state"])["epoch"])
+    except (SafetensorError, OSError, KeyError, ValueError, TypeError) as err:
+        raise DataError(f"{path}: not a valid resume state ({err})") from err
+
+
+def load_state(
+    out: Path, model: QNet, optimizer: torch.optim.Optimizer, rng: np.random.Generator
+) -> TrainState:
+    """Restore weights, optimizer, torch RNG and `rng` from the last epoch; a fresh state if none saved."""
+    path = out / STATE
+    if not path.is_file():
+        return TrainState()
+    tensors, metadata = _read_safetensors(path)
+    try:
+        meta = json.loads(metadata["state"])
+        load_trainable_state(model, {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}, path)
+        optim_state: dict[int, dict[str, torch.Tensor]] = {}
+        for key, value in tensors.items():
+            if key.startswith("optim."):
+                _, param, name = key.split(".", 2)
+                optim_state.setdefault(int(param), {})[name] = value
+        optimizer.load_state_dict({"state": optim_state, "param_groups": meta["param_groups"]})
+        torch.set_rng_state(tensors["rng.torch"])
+        rng.bit_generator.state = meta["rng"]
+        return TrainState(int(meta["epoch"]), meta["history"], meta["best"])
+    except (KeyError, ValueError, TypeError) as err:
+        raise DataError(f"{path}: not a valid resume state ({err})") from err
+
+
+# --- loading a trained network ---------------------------------------------------------------------
+
+
+def load_qnet(
+    folder: Path, which: str = "best", model: str | None = None, trunk: str | None = None
+) -> tuple[QNet, dict[str, Any]]:
+    """The trained network in `folder` in eval mode, and its config.json.
+
+    `which` is "best" (lowest validation loss) or "last". `model` / `trunk`, when given, must be what
+    the folder holds. A missing or incomplete folder, or one that does not match → ConfigError.
+    """
+    folder = Path(folder)
+    if which not in WHICH:
+        raise ConfigError(f"checkpoint weights must be one of {WHICH}, got {which!r}")
+    if not folder.is_dir():
+        raise ConfigError(f"{folder}: no such checkpoint folder")
+    record = _read_config(folder)
+    config = from_dict(TrainConfig, record.get("train", {}))
+    if record.get("head", {}).get("kind") not in HEAD_KINDS or config.model != record["head"]["kind"]:
+        raise ConfigError(f"{folder / CONFIG}: unknown model kind {record.get('head', {}).get('kind')!r}")
+    for asked, held, what in ((model, config.model, "model"), (trunk, config.trunk, "trunk")):
+        if asked is not None and asked != held:
+            raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
+    path = folder / f"{which}.safetensors"
+    if not path.is_file():
+        raise ConfigError(f"{folder}: incomplete checkpoint, no {path.name} (no epoch finished yet?)")
+    net = build_qnet(config)
+    load_trainable_state(net, _read_safetensors(path)[0], path)
+    return net.eval(), record
+
+
+def _read_config(folder: Path) -> dict[str, Any]:
+    path = folder / CONFIG
+    if not path.is_file():
+        raise ConfigError(f"{folder}: not a checkpoint folder (no {CONFIG})")
+    record = read_json(path)
+    found = record.get("format") if isinstance(record, dict) else record
+    if found != FORMAT:
+        raise ConfigError(f"{path}: not a {FORMAT} config (format {found!r})")
+    return record
+
+
+def _read_safetensors(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    try:
+        with safe_open(path, framework="pt") as f:
+            return {key: f.get_tensor(key) for key in f.keys()}, f.metadata() or {}  # noqa: SIM118
+    except (SafetensorError, OSError) as err:
+        raise DataError(f"{path}: not a readable safetensors file ({err})") from err

@@ -1,0 +1,78 @@
+"""Training batches of one view, "a random run, then a random frame of it" (SPEC §1.6).
+
+Two sources with one interface, so the training loop does not care which trunk it trains:
+
+- `FeatureSamples`: a frozen trunk's cached features, held in memory (float16), batches in
+  microseconds; the model runs its head only.
+- `ImageSamples`: frames decoded from the run files and resized, for a trunk trained with the
+  head (MobileNet-v1-0.25 from scratch); slow, but it only has to work.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from depthq.data.views import FrameView, run_then_frame
+from depthq.nets.heads import QNet
+from depthq.nets.trunk import preprocess
+from depthq.train.features import FeatureTable
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Model inputs (features (B, D) or images (B, 3, S, S)), actions (B,), targets (B, bins) or (B,)."""
+
+    inputs: torch.Tensor
+    actions: torch.Tensor
+    targets: torch.Tensor
+
+
+class Samples:
+    """The samples of a view; `draw` picks batch indices, `batch` builds one, `predict` runs the model."""
+
+    def __init__(self, arrays: dict[str, np.ndarray]) -> None:
+        self.run_offsets = arrays["run_offsets"]
+        self.actions = torch.from_numpy(arrays["action"]).float()
+        self.targets = torch.from_numpy(arrays["target"]).float()
+
+    def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
+        return torch.from_numpy(run_then_frame(self.run_offsets, n, rng))
+
+    def batch(self, idx: torch.Tensor) -> Batch:
+        raise NotImplementedError
+
+    def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
+        raise NotImplementedError
+
+
+class FeatureSamples(Samples):
+    """Samples whose trunk features are cached: the head is all that runs."""
+
+    def __init__(self, arrays: dict[str, np.ndarray], table: FeatureTable, split: str) -> None:
+        super().__init__(arrays)
+        self.features = table.gather(split, arrays)
+
+    def batch(self, idx: torch.Tensor) -> Batch:
+        return Batch(self.features[idx].float(), self.actions[idx], self.targets[idx])
+
+    def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return model.head(batch.inputs, batch.actions)
+
+
+class ImageSamples(Samples):
+    """Samples decoded from the run files: the trunk runs (and learns) too."""
+
+    def __init__(self, view: FrameView, size: int) -> None:
+        super().__init__(view.arrays)
+        self.view = view
+        self.size = size
+
+    def batch(self, idx: torch.Tensor) -> Batch:
+        images = np.stack([self.view[i][0] for i in idx.tolist()])
+        return Batch(preprocess(images, self.size), self.actions[idx], self.targets[idx])
+
+    def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return model(batch.inputs, batch.actions)

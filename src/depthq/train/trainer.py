@@ -1,0 +1,159 @@
+"""The training loop (SPEC §1.6): epochs of `train_batches` Adadelta steps on batches drawn "a random
+run, then a random frame of it", then `val_batches` fixed validation batches; a checkpoint every epoch.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.optim import Optimizer
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from depthq.data import DataConfig
+from depthq.data.manifest import Dataset
+from depthq.data.views import CollView, DepthView, view_arrays
+from depthq.errors import ConfigError
+from depthq.nets.heads import QNet
+from depthq.nets.losses import coll_bce_loss, depth_l1_loss
+from depthq.nets.optim import make_optimizer
+from depthq.nets.trunk import TRUNKS
+from depthq.train import checkpoint
+from depthq.train.adadelta import blocked
+from depthq.train.config import TrainConfig
+from depthq.train.features import dataset_fingerprint, load_features
+from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
+
+LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
+
+
+class DivergedError(ConfigError):
+    """The loss became NaN or infinite; the usual cause is a learning rate too large (CLI exit 2)."""
+
+
+def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
+    """Train `config` into the folder `out` (layout: `depthq.train.checkpoint`) and return it.
+
+    A folder holding this training resumes from its last epoch, bit for bit as if never stopped;
+    a finished one is returned as is; one holding another training is a ConfigError.
+    """
+    out = Path(out)
+    dataset = Dataset.open(Path(config.data))
+    fingerprint = dataset_fingerprint(dataset)
+    resuming = checkpoint.check_folder(out, config, fingerprint)
+    if resuming and checkpoint.saved_epoch(out) >= config.epochs:
+        return out
+    train_set, val_set = _samples(config, dataset, progress)
+    out.mkdir(parents=True, exist_ok=True)
+    checkpoint.write_config(out, config, fingerprint)
+
+    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
+    # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
+    torch.set_flush_denormal(True)
+    torch.manual_seed(config.seed)  # head initialisation and dropout
+    model = checkpoint.build_qnet(config)
+    optimizer = blocked(make_optimizer(model, config.learning_rate, config.weight_decay))
+    for group in optimizer.param_groups:
+        group.update(rho=config.rho, eps=config.eps)
+    loss_fn = depth_l1_loss if config.model == "depth" else coll_bce_loss
+    rng = np.random.default_rng(config.seed)  # training batches
+    val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
+    val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
+    state = checkpoint.load_state(out, model, optimizer, rng)
+
+    tb = SummaryWriter(out / "tb", purge_step=state.epoch + 1)
+    bar = tqdm(total=config.epochs, initial=state.epoch, desc=f"train {config.model}", unit="epoch",
+               disable=not progress)
+    try:
+        for epoch in range(state.epoch + 1, config.epochs + 1):
+            start = time.perf_counter()
+            model.train()
+            train_losses = []
+            for _ in range(config.train_batches):
+                batch = train_set.batch(train_set.draw(config.batch_size, rng))
+                train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer))
+                _check_finite(train_losses[-1], "training", epoch, out, state)
+
+            model.eval()  # no dropout; a trained trunk's BatchNorm uses its running statistics
+            val_losses, val_stds = [], []
+            with torch.no_grad():
+                for idx in val_batches:
+                    batch = val_set.batch(idx)
+                    loss, per_sample = loss_fn(val_set.predict(model, batch), batch.targets)
+                    val_losses.append(loss.item())
+                    val_stds.append(per_sample.std().item())
+            row = {
+                "epoch": epoch,
+                "train_loss": float(np.mean(train_losses)),
+                "val_loss": float(np.mean(val_losses)),
+                "val_loss_std": float(np.mean(val_stds)),  # the paper's over-fitting signal (Fig. 5)
+                "seconds": round(time.perf_counter() - start, 3),
+            }
+            _check_finite(row["val_loss"], "validation", epoch, out, state)
+            is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
+            state = checkpoint.TrainState(epoch, [*state.history, row], row if is_best else state.best)
+            checkpoint.save_epoch(out, model, optimizer, rng, state, is_best)
+            for key in ("train_loss", "val_loss", "val_loss_std"):
+                tb.add_scalar(f"loss/{key}", row[key], epoch)
+            bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
+            bar.update()
+    finally:
+        bar.close()
+        tb.close()
+    return out
+
+
+def train_step(model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, optimizer: Optimizer) -> float:
+    """One Adadelta step on `batch`; returns its loss. A non-finite loss is returned without a step."""
+    loss, _ = loss_fn(samples.predict(model, batch), batch.targets)
+    value = loss.item()
+    if math.isfinite(value):
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+    return value
+
+
+def _samples(config: TrainConfig, dataset: Dataset, progress: bool) -> tuple[Samples, Samples]:
+    """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
+    data = DataConfig(horizon=config.horizon, min_frames=config.min_frames)
+    if TRUNKS[config.trunk].frozen:
+        arrays = {split: view_arrays(dataset, split, n, config.model, data)
+                  for split, n in (("train", config.runs), ("val", None))}
+        _check_labels(config, arrays["train"]["target"])
+        table = load_features(dataset, config.trunk, config.input_size, progress)
+        return FeatureSamples(arrays["train"], table, "train"), FeatureSamples(arrays["val"], table, "val")
+    view = DepthView if config.model == "depth" else CollView
+    train_view = view(dataset, "train", config.runs, data)
+    _check_labels(config, train_view.arrays["target"])
+    if progress:
+        tqdm.write(f"trunk {config.trunk!r} has no pretrained weights: trained from scratch with the head, "
+                   "on images decoded every batch (slow)")
+    return ImageSamples(train_view, config.input_size), ImageSamples(view(dataset, "val", None, data),
+                                                                     config.input_size)
+
+
+def _check_labels(config: TrainConfig, targets: np.ndarray) -> None:
+    if config.model == "coll" and not targets.any():
+        raise ConfigError(
+            f"Coll-Q-Net needs collisions, but the selected training runs of {config.data} "
+            f"(runs={config.runs or 'all'}) hold none (no run ended in a bump); "
+            "train --model depth or use more runs"
+        )
+
+
+def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: checkpoint.TrainState) -> None:
+    if not math.isfinite(loss):
+        kept = (f"the last good checkpoint (epoch {state.epoch}) is kept in {out}" if state.epoch
+                else f"no epoch finished, so {out} holds no weights")
+        raise DivergedError(
+            f"training diverged: {phase} loss is {loss} in epoch {epoch}; stopped, {kept}. "
+            "Lower the learning rate (--lr) and train into a new folder"
+        )

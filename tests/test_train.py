@@ -1,0 +1,183 @@
+"""Training on a tiny real dataset (real MuJoCo runs, real EfficientNet-Lite0 weights, no mocks)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from depthq.configio import read_json
+from depthq.data.collect import CollectConfig, collect
+from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError
+from depthq.nets.optim import make_optimizer
+from depthq.nets.trunk import preprocess
+from depthq.train.adadelta import blocked
+from depthq.train.checkpoint import build_qnet, load_qnet
+from depthq.train.config import TrainConfig
+from depthq.train.features import cache_dir, load_features
+from depthq.train.trainer import DivergedError, train
+
+FAST = {"train_batches": 8, "val_batches": 2, "batch_size": 32}
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """6 training runs (3 end in a bump) + 2 validation runs of ≤ 60 steps, features cached."""
+    root = tmp_path_factory.mktemp("train") / "data"
+    collect(root, CollectConfig(runs=6, val_runs=2, max_steps=60), seed=0, workers=1, progress=False)
+    load_features(Dataset.open(root), "efficientnet_lite0", 128, progress=False)
+    return root
+
+
+def _config(data: Path, **kwargs: object) -> TrainConfig:
+    return TrainConfig(**{"model": "depth", "data": str(data), "epochs": 4, **FAST, **kwargs})
+
+
+def _metrics(out: Path) -> list[dict[str, str]]:
+    lines = (out / "metrics.csv").read_text().splitlines()
+    return [dict(zip(lines[0].split(","), line.split(","), strict=True)) for line in lines[1:]]
+
+
+@pytest.mark.parametrize("model", ["depth", "coll"])
+def test_training_lowers_the_loss(data: Path, tmp_path: Path, model: str) -> None:
+    out = train(_config(data, model=model, epochs=5), tmp_path / model, progress=False)
+    rows = _metrics(out)
+    assert [int(r["epoch"]) for r in rows] == list(range(1, 6))
+    assert float(rows[-1]["train_loss"]) < float(rows[0]["train_loss"])
+    assert min(float(r["val_loss"]) for r in rows[1:]) < float(rows[0]["val_loss"])
+    record = read_json(out / "config.json")
+    assert record["train"]["model"] == model
+    assert record["learning_rate"] == {"depth": 0.1, "coll": 0.01}[model]
+    assert read_json(out / "last.json")["epoch"] == 5
+    assert any((out / "tb").iterdir())
+
+
+def test_resume_is_bit_identical_and_a_finished_run_is_a_no_op(data: Path, tmp_path: Path) -> None:
+    whole = train(_config(data), tmp_path / "whole", progress=False)
+    split = train(_config(data, epochs=2), tmp_path / "split", progress=False)
+    assert read_json(split / "last.json")["epoch"] == 2
+    train(_config(data), split, progress=False)  # resumes epochs 3 and 4
+    for which in ("last", "best"):
+        a, b = load_file(whole / f"{which}.safetensors"), load_file(split / f"{which}.safetensors")
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    strip = [{k: v for k, v in r.items() if k != "seconds"} for r in _metrics(whole)]
+    assert strip == [{k: v for k, v in r.items() if k != "seconds"} for r in _metrics(split)]
+
+    stamp = (whole / "last.safetensors").stat().st_mtime_ns
+    assert train(_config(data), whole, progress=False) == whole
+    assert (whole / "last.safetensors").stat().st_mtime_ns == stamp
+
+
+def test_another_config_in_the_same_folder_is_refused(data: Path, tmp_path: Path) -> None:
+    out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
+    with pytest.raises(ConfigError, match="batch_size"):
+        train(_config(data, epochs=1, batch_size=16), out, progress=False)
+
+
+def test_checkpoint_loads_back(data: Path, tmp_path: Path) -> None:
+    out = train(_config(data, epochs=2), tmp_path / "run", progress=False)
+    net, record = load_qnet(out, "last", model="depth", trunk="efficientnet_lite0")
+    assert not net.training and record["trunk"] == "efficientnet_lite0"
+    saved = load_file(out / "last.safetensors")
+    assert all(torch.equal(saved[f"head.{k}"], v) for k, v in net.head.state_dict().items())
+
+    dataset = Dataset.open(data)
+    entry = dataset.entries("val")[0]
+    with dataset.reader(entry) as reader:
+        image = preprocess(reader.image(3))
+    actions = torch.tensor([-1.0, 0.0, 1.0])
+    q = net.q_values(image, actions)
+    assert torch.equal(q, load_qnet(out, "last")[0].q_values(image, actions))  # same net, same output
+    table = load_features(dataset, "efficientnet_lite0", 128, progress=False)
+    cached = torch.from_numpy(table.features[table.runs[entry.name][0] + 3].astype(np.float32))
+    torch.testing.assert_close(net.q_values(cached, actions), q, atol=2e-2, rtol=1e-2)  # float16 cache
+
+
+def test_feature_cache_is_reused_and_invalidated(data: Path, tmp_path: Path) -> None:
+    dataset = Dataset.open(data)
+    index = cache_dir(data, "efficientnet_lite0", 128) / "index.json"
+    stamp = index.stat().st_mtime_ns
+    table = load_features(dataset, "efficientnet_lite0", 128, progress=False)
+    assert not table.computed and index.stat().st_mtime_ns == stamp
+    assert table.features.shape == (sum(e.n_frames for e in dataset.entries()), 1280)
+
+    small = load_features(dataset, "efficientnet_lite0", 64, progress=False)
+    assert small.computed and small.features.shape == table.features.shape
+    assert not load_features(dataset, "efficientnet_lite0", 64, progress=False).computed
+
+    changed = tmp_path / "changed"  # the same dataset with its last training run gone
+    shutil.copytree(data, changed)
+    manifest = json.loads((changed / "manifest.json").read_text())
+    last = max(i for i, row in enumerate(manifest["runs"]) if row["split"] == "train")
+    manifest["runs"].pop(last)
+    (changed / "manifest.json").write_text(json.dumps(manifest))
+    fewer = load_features(Dataset.open(changed), "efficientnet_lite0", 64, progress=False)
+    assert fewer.computed and fewer.features.shape[0] < small.features.shape[0]
+    np.testing.assert_array_equal(fewer.features[:100], small.features[:100])
+
+    index.unlink()  # an interrupted computation leaves no index: never read as complete
+    assert load_features(dataset, "efficientnet_lite0", 128, progress=False).computed
+
+
+def test_blocked_adadelta_equals_torch_adadelta() -> None:
+    torch.manual_seed(0)
+    a = build_qnet(TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025"))
+    b = build_qnet(TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025"))
+    b.load_state_dict(a.state_dict())
+    opt_a, opt_b = make_optimizer(a, 0.1), blocked(make_optimizer(b, 0.1))
+    images, actions, target = torch.rand(4, 3, 64, 64), torch.rand(4), torch.tensor([0.0, 1.0, 0.0, 1.0])
+    for model, opt in ((a, opt_a), (b, opt_b)):
+        torch.manual_seed(1)  # the same dropout masks
+        for _ in range(3):
+            loss = torch.nn.functional.binary_cross_entropy_with_logits(model(images, actions), target)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    assert all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
+
+
+def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path) -> None:
+    config = _config(data, trunk="mobilenet_v1_025", epochs=1, train_batches=2, batch_size=8, input_size=64)
+    out = train(config, tmp_path / "mobilenet", progress=False)
+    net, _ = load_qnet(out, "best")
+    assert not net.trunk.frozen and any(k.startswith("trunk.") for k in load_file(out / "best.safetensors"))
+
+
+def test_bad_inputs(data: Path, tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="'wall'"):
+        TrainConfig(model="wall", data=str(data))
+    with pytest.raises(ConfigError, match="epochs"):
+        TrainConfig(model="depth", data=str(data), epochs=0)
+
+    no_bumps = tmp_path / "no_bumps"  # seed 0, 25 steps: no run lasts long enough to bump
+    collect(no_bumps, CollectConfig(runs=2, val_runs=1, max_steps=25), seed=0, workers=1, progress=False)
+    with pytest.raises(ConfigError, match="no run ended in a bump"):
+        train(_config(no_bumps, model="coll"), tmp_path / "coll", progress=False)
+    assert not (tmp_path / "coll").exists()
+
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ConfigError, match=r"no config\.json"):
+        load_qnet(tmp_path / "empty")
+    with pytest.raises(ConfigError, match="no such checkpoint"):
+        load_qnet(tmp_path / "missing")
+    out = train(_config(data, epochs=1), tmp_path / "depth", progress=False)
+    with pytest.raises(ConfigError, match="'coll'"):
+        load_qnet(out, model="coll")
+    record = read_json(out / "config.json")
+    record["head"]["kind"] = "sonar"
+    (out / "config.json").write_text(json.dumps(record))
+    with pytest.raises(ConfigError, match="sonar"):
+        load_qnet(out)
+
+
+def test_divergence_stops_with_a_clear_error(data: Path, tmp_path: Path) -> None:
+    with pytest.raises(DivergedError, match=r"diverged.*no epoch finished"):
+        train(_config(data, lr=1e30), tmp_path / "nan", progress=False)
+    assert (tmp_path / "nan" / "config.json").is_file()
+    assert not (tmp_path / "nan" / "last.safetensors").exists()
