@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import math
 import sys
 
@@ -17,7 +16,7 @@ from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, sa
 from depthq.nets.heads import CollHead, DepthHead, HeadConfig, QNet, build_head, probability
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.mobilenet_v1 import MobileNetV1
-from depthq.nets.optim import EPS, RHO, compiled_step, make_optimizer
+from depthq.nets.optim import EPS, RHO, make_optimizer
 from depthq.nets.trunk import TRUNKS, build_trunk, preprocess
 
 CAT_CLASSES = range(281, 286)  # tabby, tiger cat, Persian, Siamese, Egyptian cat
@@ -175,22 +174,6 @@ def test_optimizer_decays_conv_weights_only():
 
 
 @pytest.mark.filterwarnings("ignore:`torch.jit.script_method` is deprecated:DeprecationWarning")  # torch's
-def test_compiled_step_makes_the_eager_update():
-    torch.manual_seed(0)
-    model = nn.Sequential(nn.Conv2d(3, 4, 3), nn.Flatten(), nn.Linear(4 * 4 * 4, 2))
-    twin = copy.deepcopy(model)
-    eager, fused = make_optimizer(model, lr=0.1), make_optimizer(twin, lr=0.1)
-    step = compiled_step(fused)
-    images = torch.randn(5, 3, 6, 6)
-    for _ in range(3):
-        for net, opt, opt_step in ((model, eager, eager.step), (twin, fused, step)):
-            opt.zero_grad()
-            net(images).square().sum().backward()
-            opt_step()
-    for a, b in zip(model.parameters(), twin.parameters(), strict=True):
-        torch.testing.assert_close(a, b)
-
-
 def test_optimizer_leaves_out_a_frozen_trunk(effnet_trunk):
     qnet = QNet(effnet_trunk, build_head(HeadConfig("coll", 1280)))
     opt = make_optimizer(qnet, lr=0.01)

@@ -9,7 +9,6 @@ whatever the number of workers and however often the collection was interrupted 
 from __future__ import annotations
 
 import multiprocessing as mp
-import queue
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
 from depthq.errors import ConfigError
+from depthq.parallel import next_result
 from depthq.sim.canyon import CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
 
@@ -208,7 +208,7 @@ def _run_all(
         p.start()
     try:
         for _ in todo:
-            meta, sha, size = _next_result(results, procs)
+            meta, sha, size = next_result(results, procs, "collection")
             yield RunMeta(**meta), FileInfo(sha256=sha, bytes=size)
     finally:
         for p in procs:
@@ -216,12 +216,3 @@ def _run_all(
                 p.terminate()
             p.join()
 
-
-def _next_result(results, procs) -> tuple:
-    """Wait for a finished run; fail instead of hanging when every worker has died."""
-    while True:
-        try:
-            return results.get(timeout=5)
-        except queue.Empty:
-            if not any(p.is_alive() for p in procs):
-                raise RuntimeError("all collection workers died; run the same command to resume") from None

@@ -20,6 +20,7 @@ from tqdm import tqdm
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE, distance_from_spawn, imitation_loss, summarize
+from depthq.parallel import next_result
 from depthq.sim.canyon import N_EVAL_CANYONS, CanyonId
 
 RUN_FIELDS = (
@@ -175,7 +176,7 @@ def evaluate(
             dynamic_ncols=True,
         ) as bar:
             while len(runs) < len(config.canyons):
-                k, run = _next(results, procs)
+                k, run = next_result(results, procs, "evaluation")
                 runs[k] = run
                 bar.update(1)
                 bar.set_postfix(success=sum(r["success"] for r in runs.values()))
@@ -201,17 +202,6 @@ def evaluate(
     }
     _write(out, summary, ordered)
     return summary
-
-
-def _next(results, procs):
-    import queue
-
-    while True:
-        try:
-            return results.get(timeout=5)
-        except queue.Empty:
-            if not any(p.is_alive() for p in procs):
-                raise RuntimeError("all evaluation workers died") from None
 
 
 def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]]) -> None:

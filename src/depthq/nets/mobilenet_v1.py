@@ -28,7 +28,9 @@ BLOCKS: tuple[tuple[int, int], ...] = (
     (1024, 1),
 )
 STEM_CHANNELS = 32
-BN_EPS = 1e-3  # TF-slim's MobileNet value
+FEATURE_DIM = int(BLOCKS[-1][0] * WIDTH)  # 256
+BN_EPS = 1e-3  # TF-slim's MobileNet value. Momentum stays PyTorch's 0.1: slim's decay 0.9997 suits
+# ImageNet-length training, not the few thousand steps this trunk gets.
 
 
 def _conv_bn_relu6(in_ch: int, out_ch: int, kernel: int, stride: int, groups: int = 1) -> nn.Sequential:

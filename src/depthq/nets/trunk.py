@@ -16,7 +16,9 @@ import torch.nn.functional as F
 from torch import nn
 
 from depthq.errors import ConfigError
-from depthq.nets.efficientnet_lite import FEATURE_DIM, efficientnet_lite0, fold_batchnorm
+from depthq.nets.efficientnet_lite import FEATURE_DIM as EFFICIENTNET_DIM
+from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm
+from depthq.nets.mobilenet_v1 import FEATURE_DIM as MOBILENET_DIM
 from depthq.nets.mobilenet_v1 import MobileNetV1
 
 INPUT_SIZE = 128
@@ -65,7 +67,6 @@ class TrunkSpec:
     build: Callable[[bool], nn.Module]
     feature_dim: int
     frozen: bool
-    description: str
 
 
 def _efficientnet(pretrained: bool) -> nn.Module:
@@ -78,12 +79,8 @@ def _mobilenet(pretrained: bool) -> nn.Module:
 
 
 TRUNKS: dict[str, TrunkSpec] = {
-    "efficientnet_lite0": TrunkSpec(
-        _efficientnet, FEATURE_DIM, True, "EfficientNet-Lite0, ImageNet weights, frozen (default)"
-    ),
-    "mobilenet_v1_025": TrunkSpec(
-        _mobilenet, 256, False, "MobileNet-v1 width 0.25 (the paper's), from scratch, trained with the head"
-    ),
+    "efficientnet_lite0": TrunkSpec(_efficientnet, EFFICIENTNET_DIM, frozen=True),  # the default
+    "mobilenet_v1_025": TrunkSpec(_mobilenet, MOBILENET_DIM, frozen=False),  # the paper's, from scratch
 }
 
 

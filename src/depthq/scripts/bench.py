@@ -1,62 +1,90 @@
-"""Measure the speed targets of SPEC §4 (benchmarks, never timed tests)."""
+"""Measure the speed targets of SPEC §4 (benchmarks, never timed tests); the last line is the figure."""
 
 from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from depthq.errors import ConfigError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="what", required=True, metavar="WHAT")
-    sim = sub.add_parser("sim", help="env steps/s with camera + LiDAR at full resolution")
+    sim = sub.add_parser("sim", help="env steps/s, camera + LiDAR at full resolution (target ≥ 120)")
     sim.add_argument("--steps", type=int, default=1000, help="steps per worker")
     sim.add_argument("--workers", type=int, default=1)
-    sim.add_argument("--json", action="store_true")
-    col = sub.add_parser("collect", help="collection steps/s with storage, 1 and W workers")
+    col = sub.add_parser(
+        "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
+    )
     col.add_argument("--runs", type=int, default=20)
     col.add_argument("--workers", type=int, default=2)
-    col.add_argument("--json", action="store_true")
+    feat = sub.add_parser("features", help="trunk features/s end to end on a dataset's frames (≥ 300)")
+    feat.add_argument("--data", type=Path, required=True, help="a dataset folder")
+    feat.add_argument("--frames", type=int, default=1024)
+    tr = sub.add_parser("train", help="head training samples/s and its ratio to matmul FLOP/s (≥ 0.6)")
+    tr.add_argument("--seconds", type=float, default=10.0)
+    pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
+    pol.add_argument("--checkpoint", type=Path, default=None, help="a checkpoint folder (optional)")
+    pol.add_argument("--decisions", type=int, default=200)
+    for parser in (sim, col, feat, tr, pol):
+        parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
 
 
-def _positive(name: str, value: int) -> None:
-    if value <= 0:
+def _positive(name: str, value: float) -> None:
+    if not value > 0:
         raise ConfigError(f"{name} must be > 0, got {value}")
 
 
-def run(args: argparse.Namespace) -> int:
+def _measure(args: argparse.Namespace) -> tuple[dict, str]:
+    """Run the chosen benchmark; returns its result and the one-line figure."""
     if args.what == "sim":
         _positive("--steps", args.steps)
         _positive("--workers", args.workers)
         from depthq.sim.bench import bench_sim
 
-        result = bench_sim(args.steps, args.workers)
-        if args.json:
-            print(json.dumps(result))
-        else:
-            print(
-                f"{result['workers']} worker(s), {result['steps']} steps in {result['seconds']} s, "
-                f"max RSS {result['max_rss_mb']} MB per process"
-            )
-            print(f"{result['steps_per_s']} env steps/s")
+        r = bench_sim(args.steps, args.workers)
+        return (
+            r,
+            f"{r['steps_per_s']} env steps/s with {r['workers']} worker(s), max RSS {r['max_rss_mb']} MB",
+        )
     if args.what == "collect":
         _positive("--runs", args.runs)
         _positive("--workers", args.workers)
         from depthq.data.bench import bench_collect
 
-        result = bench_collect(args.runs, tuple(sorted({1, args.workers})))
-        if args.json:
-            print(json.dumps(result))
-        else:
-            for key, r in result.items():
-                if key.startswith("w"):
-                    print(
-                        f"{key[1:]} worker(s): {r['frames']} frames in {r['seconds']} s, "
-                        f"{r['steps_per_s_per_worker']} steps/s per worker, {r['kb_per_frame']} KB per frame"
-                    )
-            if "speedup" in result:
-                print(f"speedup {result['speedup']}x")
-            last = result[f"w{args.workers}"]
-            print(f"{last['steps_per_s']} steps/s stored with {args.workers} worker(s)")
+        r = bench_collect(args.runs, tuple(sorted({1, args.workers})))
+        last = r[f"w{args.workers}"]
+        return r, (
+            f"{r['w1']['steps_per_s']} steps/s with 1 worker, {last['steps_per_s']} with {args.workers} "
+            f"(×{r.get('speedup', 1.0)}), {last['kb_per_frame']} KB per frame"
+        )
+    if args.what == "features":
+        _positive("--frames", args.frames)
+        from depthq.train.bench import bench_features
+
+        r = bench_features(args.data, n=args.frames)
+        return (
+            r,
+            f"{r['frames_per_s']} frames/s ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)",
+        )
+    if args.what == "train":
+        _positive("--seconds", args.seconds)
+        from depthq.train.bench import bench_train
+
+        r = bench_train(args.seconds)
+        return r, (
+            f"{r['samples_per_s']} head samples/s, {r['head_gflops']} GFLOP/s = {r['ratio']} × matmul's "
+            f"{r['matmul_gflops']} GFLOP/s"
+        )
+    _positive("--decisions", args.decisions)
+    from depthq.evaluate.bench import bench_policy
+
+    r = bench_policy(args.checkpoint, args.decisions)
+    return r, f"{r['ms_median']} ms median per decision ({r['ms_p90']} ms p90, {r['threads']} threads)"
+
+
+def run(args: argparse.Namespace) -> int:
+    result, figure = _measure(args)
+    print(json.dumps(result) if args.json else figure)
     return 0

@@ -59,9 +59,8 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     torch.set_flush_denormal(True)
     torch.manual_seed(config.seed)  # head initialisation and dropout
     model = checkpoint.build_qnet(config)
-    optimizer = blocked(make_optimizer(model, config.learning_rate, config.weight_decay))
-    for group in optimizer.param_groups:
-        group.update(rho=config.rho, eps=config.eps)
+    c = config
+    optimizer = blocked(make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps))
     loss_fn = depth_l1_loss if config.model == "depth" else coll_bce_loss
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch

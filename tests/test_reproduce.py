@@ -1,0 +1,63 @@
+"""The smoke preset end to end: real collection, training, evaluation and report (a few minutes)."""
+
+import csv
+import re
+import shutil
+
+import pytest
+
+from depthq.cli import main
+from depthq.configio import read_json
+from depthq.report.reproduce import reproduce
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("smoke") / "out"
+    reproduce("smoke", out, progress=False)
+    return out
+
+
+def test_tables_hold_numbers_for_both_networks(smoke):
+    with (smoke / "table1.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [r["runs"] for r in rows] == ["3", "6"]
+    number = re.compile(r"^\d+\.\d+ \(\d+\.\d+\)$")
+    for row in rows:
+        for column in ("distance CQN", "distance DQN", "success CQN", "success DQN", "imitation CQN",
+                       "imitation DQN", "cross-entropy CQN", "abs diff DQN"):
+            assert number.match(row[column]), (column, row[column])
+    table1 = (smoke / "table1.md").read_text()
+    assert "| heuristic |" in table1 and "| ou |" in table1
+    table2 = (smoke / "table2.md").read_text()
+    assert re.search(r"^\| 6 \| \d+ \| \d+ \|", table2, re.M)
+
+
+def test_report_is_self_contained_and_references_only_existing_files(smoke):
+    html = (smoke / "report.html").read_text()
+    for ref in re.findall(r'(?:src|href)="([^"]+)"', html):
+        assert ref.startswith("data:image/png;base64,") or (smoke / ref).is_file(), ref
+    assert html.count("data:image/png;base64,") >= 4
+    for name in ("fig4_qualitative.png", "fig5_convergence.png", "success_vs_runs.png"):
+        assert (smoke / name).stat().st_size > 5000
+
+
+def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
+    stamps = {p: p.stat().st_mtime_ns for p in (smoke / "eval").glob("*/summary.json")}
+    stamps |= {p: p.stat().st_mtime_ns for p in (smoke / "models").glob("*/last.safetensors")}
+    shutil.rmtree(smoke / "eval" / "depth_n3_s0")
+    times = reproduce("smoke", smoke, progress=False)
+    redone = smoke / "eval" / "depth_n3_s0" / "summary.json"
+    assert redone.is_file()
+    for path, stamp in stamps.items():
+        if path != redone:
+            assert path.stat().st_mtime_ns == stamp, f"{path} was redone"
+    assert set(read_json(smoke / "stages.json")) == set(times)
+
+
+def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
+    assert main(["reproduce", "--preset", "huge", "--out", str(tmp_path / "x")]) == 2
+    assert "huge" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+    assert main(["reproduce", "--preset", "quick", "--out", str(smoke)]) == 2
+    assert "smoke" in capsys.readouterr().err
