@@ -1,5 +1,6 @@
 """The canyon world in real MuJoCo: geometry, driving, LiDAR, camera, termination, env checker."""
 
+import json
 import math
 
 import gymnasium
@@ -161,3 +162,16 @@ def test_nan_action_is_refused(env):
     env.reset(seed=0, options={"canyon": "eval:0"})
     with pytest.raises(ConfigError, match="nan"):
         env.step(np.array([np.nan], np.float32))
+
+
+def test_drive_writes_a_map_and_frames_and_refuses_bad_input(tmp_path, capsys):
+    from depthq.cli import main
+
+    assert main(["drive", "--canyon", "eval:33", "--out", str(tmp_path / "bad")]) == 2
+    assert "33" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+    assert main(["drive", "--canyon", "eval:2", "--time-limit", "2", "--frames", "2", "--json",
+                 "--out", str(tmp_path / "ok")]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["end_reason"] == "time_limit" and 0.9 < result["distance"] <= 1.01
+    assert (tmp_path / "ok" / "top_down.png").stat().st_size > 1000
+    assert len(list((tmp_path / "ok").glob("frame_*.png"))) == 2

@@ -20,7 +20,7 @@ from depthq.train.adadelta import blocked
 from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig
 from depthq.train.features import BATCH as DECODE_BATCH
-from depthq.train.features import FeatureTable, frame_batches, prefetch
+from depthq.train.features import FeatureTable, frame_batches, prefetch, trunk_threads
 from depthq.train.samples import FeatureSamples
 from depthq.train.trainer import train_step
 
@@ -93,7 +93,7 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
 def bench_features(data: Path, n: int = 512, size: int = 128, trunk: str = "efficientnet_lite0") -> dict:
     """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
     resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
-    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_num_threads(trunk_threads())
     dataset = Dataset.open(Path(data))
     net = build_trunk(trunk)
     frames = 0

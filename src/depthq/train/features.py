@@ -96,6 +96,12 @@ def load_features(dataset: Dataset, trunk: str, size: int, progress: bool = True
     return FeatureTable(table.features, table.runs, computed=True)
 
 
+def trunk_threads() -> int:
+    """Threads for the trunk while one core decodes JPEGs: all cores but one (oversubscribed OpenMP
+    threads wait for each other at every layer)."""
+    return max(1, len(os.sched_getaffinity(0)) - 1)
+
+
 def features_ready(dataset: Dataset, trunk: str, size: int) -> bool:
     """Whether a valid cache of `dataset` for (trunk, size) is on disk."""
     return _read(cache_dir(dataset.root, trunk, size), _index(dataset, trunk, size)) is not None
@@ -109,7 +115,7 @@ def compute_features(
     (folder / INDEX).unlink(missing_ok=True)  # from here on the folder is incomplete
     n_frames = sum(n for _, n in index["runs"].values())
     tmp = folder / f".{ARRAY}.{os.getpid()}.tmp"
-    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_num_threads(trunk_threads())
     start = time.perf_counter()
     try:
         out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16, shape=(n_frames, trunk.feature_dim))
