@@ -108,12 +108,12 @@ def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, in
 def _worker(config: CollectConfig, seed: int, root: str, tasks, results) -> None:
     """Collect and write runs from the task queue; the parent alone writes the manifest."""
     env = CanyonEnv(config.env)
-    dataset_paths = Path(root)
+    runs_dir = Path(root) / "runs"
     try:
         while (task := tasks.get()) is not None:
             split, index = task
             run = collect_run(env, config, seed, split, index)
-            path = dataset_paths / "runs" / f"{run.meta.name}.h5"
+            path = runs_dir / f"{run.meta.name}.h5"
             info = write_run(path, run, config.data.jpeg_quality)
             results.put((to_dict(run.meta), info.sha256, info.bytes))
     finally:

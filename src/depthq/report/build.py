@@ -62,20 +62,20 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
         [
             (
                 "Table I",
-                f"<p>{note}</p>" + page._table(t1) + "<h3>Reference policies</h3>" + page._table(refs),
+                f"<p>{note}</p>" + page.table(t1) + "<h3>Reference policies</h3>" + page.table(refs),
             ),
-            ("Success rate against training runs", page._img(out / "success_vs_runs.png", "success vs runs")),
-            ("Table II", page._table(t2)),
-            ("Fig. 4: Depth-Q-Net predictions", page._img(out / "fig4_qualitative.png", "Fig. 4")),
-            ("Fig. 5: convergence", page._img(out / "fig5_convergence.png", "Fig. 5")),
-            ("Trajectories", "".join(page._img(p, alt) for p, alt in figures)),
+            ("Success rate against training runs", page.img(out / "success_vs_runs.png", "success vs runs")),
+            ("Table II", page.table(t2)),
+            ("Fig. 4: Depth-Q-Net predictions", page.img(out / "fig4_qualitative.png", "Fig. 4")),
+            ("Fig. 5: convergence", page.img(out / "fig5_convergence.png", "Fig. 5")),
+            ("Trajectories", "".join(page.img(p, alt) for p, alt in figures)),
             (
                 "Deviations from the paper",
-                page._table([{"original": o, "ours": w, "why": y} for o, w, y in page.DEVIATIONS]),
+                page.table([{"original": o, "ours": w, "why": y} for o, w, y in page.DEVIATIONS]),
             ),
             (
                 "Measured stage times (s)",
-                page._table([{"stage": k, "seconds": f"{v:.1f}"} for k, v in stage_seconds.items()]),
+                page.table([{"stage": k, "seconds": f"{v:.1f}"} for k, v in stage_seconds.items()]),
             ),
             (
                 "Configuration",

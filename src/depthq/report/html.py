@@ -35,7 +35,7 @@ DEVIATIONS = [
 ]
 
 
-def _img(path: Path, alt: str) -> str:
+def img(path: Path, alt: str) -> str:
     if not path.is_file():
         return f"<p><em>{html.escape(alt)}: not produced</em></p>"
     data = base64.b64encode(path.read_bytes()).decode()
@@ -45,7 +45,7 @@ def _img(path: Path, alt: str) -> str:
     )
 
 
-def _table(rows: list[dict[str, str]]) -> str:
+def table(rows: list[dict[str, str]]) -> str:
     if not rows:
         return "<p><em>no rows</em></p>"
     head = "".join(f"<th>{html.escape(h)}</th>" for h in rows[0])

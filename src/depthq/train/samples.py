@@ -10,6 +10,7 @@ Two sources with one interface, so the training loop does not care which trunk i
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +31,7 @@ class Batch:
     targets: torch.Tensor
 
 
-class Samples:
+class Samples(ABC):
     """The samples of a view; `draw` picks batch indices, `batch` builds one, `predict` runs the model."""
 
     def __init__(self, arrays: dict[str, np.ndarray]) -> None:
@@ -41,11 +42,11 @@ class Samples:
     def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
         return torch.from_numpy(run_then_frame(self.run_offsets, n, rng))
 
-    def batch(self, idx: torch.Tensor) -> Batch:
-        raise NotImplementedError
+    @abstractmethod
+    def batch(self, idx: torch.Tensor) -> Batch: ...
 
-    def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
-        raise NotImplementedError
+    @abstractmethod
+    def predict(self, model: QNet, batch: Batch) -> torch.Tensor: ...
 
 
 class FeatureSamples(Samples):
