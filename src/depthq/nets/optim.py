@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import torch
 from torch import nn
 
 from depthq.errors import ConfigError
+from depthq.nets.adadelta import BlockedAdadelta
 
 # TensorFlow's Adadelta defaults; PyTorch's are rho=0.9, eps=1e-6.
 RHO = 0.95
@@ -14,8 +14,9 @@ WEIGHT_DECAY = 4e-5
 
 
 def make_optimizer(model: nn.Module, lr: float, weight_decay: float = WEIGHT_DECAY, rho: float = RHO,
-                   eps: float = EPS) -> torch.optim.Adadelta:
-    """Adadelta over the trainable parameters of `model`; frozen ones are left out.
+                   eps: float = EPS) -> BlockedAdadelta:
+    """Adadelta (stepped block by block, see `depthq.nets.adadelta`) over the trainable parameters
+    of `model`; frozen ones are left out.
 
     Weight decay (gradient += wd · w, the same as TF's l2_regularizer(wd) on tf.nn.l2_loss) applies
     to nn.Conv2d weights only, as in the paper; heads (Linear layers), biases and BatchNorm get none.
@@ -36,4 +37,4 @@ def make_optimizer(model: nn.Module, lr: float, weight_decay: float = WEIGHT_DEC
     ]
     if not groups:
         raise ConfigError("make_optimizer: the model has no trainable parameters")
-    return torch.optim.Adadelta(groups, lr=lr, rho=rho, eps=eps)
+    return BlockedAdadelta(groups, lr=lr, rho=rho, eps=eps)

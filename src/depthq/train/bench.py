@@ -16,7 +16,6 @@ from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import build_trunk
-from depthq.train.adadelta import blocked
 from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig
 from depthq.train.features import BATCH as DECODE_BATCH
@@ -41,7 +40,7 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     config = TrainConfig(model="depth", data="-")
     head = head_config(config)
     model = QNet(build_trunk(config.trunk, pretrained=False), build_head(head))
-    optimizer = blocked(make_optimizer(model, config.learning_rate, config.weight_decay))
+    optimizer = make_optimizer(model, config.learning_rate, config.weight_decay)
     rng = np.random.default_rng(0)
     arrays = {
         "run_offsets": np.array([0, POOL]),

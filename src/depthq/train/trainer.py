@@ -25,7 +25,6 @@ from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.train import checkpoint
-from depthq.train.adadelta import blocked
 from depthq.train.config import TrainConfig
 from depthq.train.features import dataset_fingerprint, load_features
 from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
@@ -60,7 +59,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     torch.manual_seed(config.seed)  # head initialisation and dropout
     model = checkpoint.build_qnet(config)
     c = config
-    optimizer = blocked(make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps))
+    optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
     loss_fn = depth_l1_loss if config.model == "depth" else coll_bce_loss
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch

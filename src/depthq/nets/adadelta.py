@@ -45,7 +45,3 @@ class BlockedAdadelta(torch.optim.Adadelta):
                     acc_delta.mul_(rho).addcmul_(delta, delta, value=1 - rho)
                     p.add_(delta, alpha=-lr)
 
-
-def blocked(optimizer: torch.optim.Adadelta) -> BlockedAdadelta:
-    """The same parameter groups and options (e.g. from `depthq.nets.optim.make_optimizer`), blocked."""
-    return BlockedAdadelta(optimizer.param_groups)
