@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -48,6 +49,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except DataError as err:
         print(f"depthq {args.verb}: data error: {err}", file=sys.stderr)
+        return 1
+    except OSError as err:
+        if err.errno != errno.ENOSPC:
+            raise
+        print(f"depthq {args.verb}: disk full ({err.filename or err}); nothing half-written is kept as a "
+              "result: free space and run the same command to resume.", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"depthq {args.verb}: interrupted; run the same command again to resume.", file=sys.stderr)
