@@ -23,7 +23,10 @@ VERBS: dict[str, str] = {
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="depthq", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="depthq",
+        description="Monocular collision avoidance from future depth: collect, train, evaluate, reproduce.",
+    )
     parser.add_argument("--version", action="version", version=f"depthq {__version__}")
     sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
     for verb, module_name in VERBS.items():
