@@ -33,7 +33,7 @@ RUN_FIELDS = (
     "imitation_loss",
     "decision_ms_median",
 )
-FIG4_STEPS = (5, 40, 80, 120)  # frames kept for the Fig. 4-style snapshot of the first canyon
+FIG4_EVERY, FIG4_FRAMES = 5, 4  # the first canyon keeps every 5th frame; Fig. 4 shows 4, evenly spread
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
     return tuple(str(CanyonId("eval", i)) for i in indices)
 
 
-def drive(policy, env, expert, canyon: str, seed: int, keep_steps: tuple[int, ...] = ()) -> dict[str, Any]:
+def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> dict[str, Any]:
     """One run: the policy drives, the expert is asked on the same observations."""
     from depthq.sim.env import parse_canyon
 
@@ -90,7 +90,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_steps: tuple[int, ..
         values = getattr(policy, "last_values", None)
         before = obs
         obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
-        if step in keep_steps and values is not None:
+        if keep_every and step % keep_every == 0 and values is not None:
             snaps.append(
                 {
                     "step": step,
@@ -107,6 +107,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_steps: tuple[int, ..
         step += 1
     poses = np.asarray(poses)
     distance = distance_from_spawn(poses)
+    shown = np.unique(np.linspace(0, len(snaps) - 1, FIG4_FRAMES).round().astype(int)) if snaps else []
     return {
         "canyon": canyon,
         "distance": distance,
@@ -118,7 +119,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_steps: tuple[int, ..
         "decision_ms_median": float(np.median(ms)),
         "poses": poses.astype(np.float32),
         "actions": np.asarray(actions, np.float32),
-        "snapshots": snaps,
+        "snapshots": [snaps[i] for i in shown],
     }
 
 
@@ -135,7 +136,7 @@ def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
     try:
         while (task := tasks.get()) is not None:
             k, canyon = task
-            keep = FIG4_STEPS if k == 0 else ()
+            keep = FIG4_EVERY if k == 0 else 0
             results.put(
                 (k, drive(policy, env, expert, canyon, config.seed + int(canyon.split(":")[1]), keep))
             )
