@@ -62,12 +62,12 @@ def plot_fig4(snaps: list[dict[str, Any]], run: dict[str, Any], policy: dict[str
             row[1].set_xlabel("bearing (°, left → right)", fontsize=8)
             row[1].set_ylabel("depth (m)", fontsize=8)
             row[1].set_ylim(0, 2.2)
+            row[1].legend(fontsize=6, loc="lower right")
         else:
             names = [ACTION_NAMES.get(a, str(a)) for a in actions]
             row[1].bar(names, snap["values"], color="tab:purple")
             row[1].set_ylim(0, 1)
             row[1].set_ylabel("P(collision within 5 frames)", fontsize=8)
-        row[1].legend(fontsize=6, loc="lower right")
         row[1].tick_params(labelsize=7)
         x, y, _ = snap["pose"]
         draw_run(row[2], canyon, run["poses"], span=y + 4)
