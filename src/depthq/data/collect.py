@@ -20,7 +20,8 @@ from tqdm import tqdm
 from depthq.configio import to_dict
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data import DataConfig
-from depthq.data.manifest import Dataset
+from depthq.data.labels import usable as is_usable
+from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
 from depthq.errors import ConfigError
@@ -62,28 +63,15 @@ def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, in
     canyon = CanyonId(split, index)
     policy = OUPolicy(config.ou, seed=policy_seed)
     obs, info = env.reset(seed=env_seed, options={"canyon": canyon})
-    images, scans, bins, actions, poses, times = [], [], [], [], [], []
-    end_reason = "step_limit"
-    for step in range(config.max_steps + 1):
-        images.append(obs["image"])
-        scans.append(obs["scan"])
-        bins.append(obs["bins"])
-        poses.append(info["pose"])
-        times.append(info["time"])
-        if step == config.max_steps:
-            break
-        action = policy.act(obs)
-        actions.append(action)
-        obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
+    frames, actions, end_reason = [(obs, info)], [], "step_limit"
+    for _ in range(config.max_steps):
+        actions.append(policy.act(obs))
+        obs, _, terminated, truncated, info = env.step(np.array([actions[-1]], np.float32))
+        frames.append((obs, info))
         if terminated or truncated:
             end_reason = info["end_reason"]
-            images.append(obs["image"])
-            scans.append(obs["scan"])
-            bins.append(obs["bins"])
-            poses.append(info["pose"])
-            times.append(info["time"])
             break
-    actions.append(np.nan)
+    actions.append(np.nan)  # the last frame is where the run ended: no action
     meta = RunMeta(
         split=split,
         index=index,
@@ -92,30 +80,34 @@ def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, in
         canyon_seed=int(canyon.seed_sequence.generate_state(1)[0]),
         policy_seed=policy_seed,
         end_reason=end_reason,
-        n_frames=len(images),
+        n_frames=len(frames),
     )
     return Run(
         meta=meta,
-        images=np.stack(images),
-        scans=np.stack(scans),
-        bins=np.stack(bins),
+        images=np.stack([o["image"] for o, _ in frames]),
+        scans=np.stack([o["scan"] for o, _ in frames]),
+        bins=np.stack([o["bins"] for o, _ in frames]),
         actions=np.asarray(actions, np.float32),
-        poses=np.asarray(poses, np.float32),
-        times=np.asarray(times, np.float32),
+        poses=np.asarray([i["pose"] for _, i in frames], np.float32),
+        times=np.asarray([i["time"] for _, i in frames], np.float32),
     )
+
+
+def collect_and_write(
+    env: CanyonEnv, config: CollectConfig, seed: int, root: Path, split: str, index: int
+) -> tuple[RunMeta, FileInfo]:
+    """One run collected and written to its file (not yet recorded: only the parent writes the manifest)."""
+    run = collect_run(env, config, seed, split, index)
+    return run.meta, write_run(run_path(root, split, index), run, config.data.jpeg_quality)
 
 
 def _worker(config: CollectConfig, seed: int, root: str, tasks, results) -> None:
     """Collect and write runs from the task queue; the parent alone writes the manifest."""
     env = CanyonEnv(config.env)
-    runs_dir = Path(root) / "runs"
     try:
         while (task := tasks.get()) is not None:
-            split, index = task
-            run = collect_run(env, config, seed, split, index)
-            path = runs_dir / f"{run.meta.name}.h5"
-            info = write_run(path, run, config.data.jpeg_quality)
-            results.put((to_dict(run.meta), info.sha256, info.bytes))
+            meta, info = collect_and_write(env, config, seed, Path(root), *task)
+            results.put((to_dict(meta), info.sha256, info.bytes))
     finally:
         env.close()
 
@@ -172,7 +164,7 @@ def _missing(dataset: Dataset, wanted: dict[str, int], min_frames: int) -> list[
         usable, index, deficit = 0, 0, []
         while usable + len(deficit) < n:
             if dataset.has(split, index):
-                usable += dataset.entry(split, index).n_frames >= min_frames
+                usable += is_usable(dataset.entry(split, index), min_frames)
             else:
                 deficit.append((split, index))
             index += 1
@@ -189,8 +181,7 @@ def _run_all(
         env = CanyonEnv(config.env)
         try:
             for split, index in todo:
-                run = collect_run(env, config, seed, split, index)
-                yield run.meta, write_run(dataset.run_path(split, index), run, config.data.jpeg_quality)
+                yield collect_and_write(env, config, seed, dataset.root, split, index)
         finally:
             env.close()
         return
@@ -215,4 +206,3 @@ def _run_all(
             if p.is_alive():
                 p.terminate()
             p.join()
-

@@ -64,6 +64,11 @@ class RunEntry(RunMeta):
         return RunMeta(**{name: getattr(self, name) for name in meta_fields()})
 
 
+def run_path(root: Path, split: str, index: int) -> Path:
+    """Where run `index` of `split` lives in the dataset folder `root` (workers write there)."""
+    return Path(root) / RUNS / f"{split}_{index:06d}.h5"
+
+
 class Dataset:
     """A dataset folder. `create` starts or resumes one (the collector), `open` reads one (everyone else)."""
 
@@ -134,7 +139,7 @@ class Dataset:
 
     def run_path(self, split: str, index: int) -> Path:
         """Where run `index` of `split` is (to be) written."""
-        return self.root / RUNS / f"{split}_{index:06d}.h5"
+        return run_path(self.root, split, index)
 
     def path(self, entry: RunEntry) -> Path:
         return self.root / entry.file
