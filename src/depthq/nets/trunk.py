@@ -18,6 +18,7 @@ from torch import nn
 from depthq.errors import ConfigError
 from depthq.nets.efficientnet_lite import FEATURE_DIM as EFFICIENTNET_DIM
 from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm
+from depthq.nets.heap import keep_freed_memory
 from depthq.nets.mobilenet_v1 import FEATURE_DIM as MOBILENET_DIM
 from depthq.nets.mobilenet_v1 import MobileNetV1
 
@@ -89,6 +90,7 @@ def build_trunk(name: str, pretrained: bool = True) -> Trunk:
     spec = TRUNKS.get(name)
     if spec is None:
         raise ConfigError(f"unknown trunk {name!r}; valid trunks: {', '.join(sorted(TRUNKS))}")
+    keep_freed_memory()  # a trunk allocates tens of MB per call: see depthq.nets.heap
     return Trunk(name, spec.build(pretrained), spec.feature_dim, spec.frozen)
 
 
