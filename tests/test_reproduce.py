@@ -8,7 +8,8 @@ import pytest
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.report.reproduce import reproduce
+from depthq.report.presets import get_preset
+from depthq.report.reproduce import build_stages, reproduce
 
 
 @pytest.fixture(scope="module")
@@ -61,3 +62,15 @@ def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
     assert not (tmp_path / "x").exists()
     assert main(["reproduce", "--preset", "quick", "--out", str(smoke)]) == 2
     assert "smoke" in capsys.readouterr().err
+
+
+def test_paper_stages_finish_seed_0_for_every_size_first(tmp_path):
+    """An interrupted `paper` run (hours long) should already hold a whole one-seed table."""
+    names = [stage.name for stage in build_stages(get_preset("paper"), tmp_path)]
+    trained = [name.removeprefix("train ") for name in names if name.startswith("train ")]
+    assert len(trained) == 6 * 3 * 2
+    first_seed_1 = trained.index("depth_n50_s1")
+    assert sorted(trained[:first_seed_1]) == sorted(
+        f"{net}_n{n}_s0" for n in (50, 100, 200, 500, 700, 900) for net in ("depth", "coll")
+    )
+    assert names.index("evaluate coll_n900_s0") < names.index("train depth_n50_s1")
