@@ -21,13 +21,15 @@ def _read_metrics(path: Path) -> dict[str, np.ndarray]:
 
 
 def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path: Path) -> None:
-    """Training and validation loss per epoch for each subset size, with the validation std band
-    (the paper's over-fitting signal), averaged over seeds."""
+    """Training and validation loss per epoch for each subset size (top), and the standard deviation
+    of the per-sample validation loss over a batch (bottom: the paper's over-fitting signal), each
+    averaged over seeds. The spread gets its own row: drawn as bands, six sizes hide each other."""
     from depthq.report.reproduce import model_name
 
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(subsets)))
-    for ax, net in zip(axes, ("depth", "coll"), strict=True):
+    for column, net in enumerate(("depth", "coll")):
+        loss_ax, std_ax = axes[0, column], axes[1, column]
         for colour, n in zip(colours, subsets, strict=True):
             logs = [
                 _read_metrics(p)
@@ -42,13 +44,17 @@ def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path:
             train = np.mean([m["train_loss"][:e] for m in logs], axis=0)
             val = np.mean([m["val_loss"][:e] for m in logs], axis=0)
             std = np.mean([m["val_loss_std"][:e] for m in logs], axis=0)
-            ax.plot(epoch, train, "--", color=colour, lw=1, label=f"{n} runs, train")
-            ax.plot(epoch, val, "-", color=colour, lw=1.5, label=f"{n} runs, validation")
-            ax.fill_between(epoch, val - std, val + std, color=colour, alpha=0.15)
-        ax.set_title(f"{NET_LABELS[net]}: {'L1 on valid bins (m)' if net == 'depth' else 'cross-entropy'}")
-        ax.set_xlabel("epoch (100 training batches of 64)")
-        ax.set_ylabel("loss")
-        ax.legend(fontsize=7)
+            loss_ax.plot(epoch, train, "--", color=colour, lw=1, label=f"{n} runs, train")
+            loss_ax.plot(epoch, val, "-", color=colour, lw=1.5, label=f"{n} runs, validation")
+            std_ax.plot(epoch, std, "-", color=colour, lw=1.5, label=f"{n} runs")
+        unit = "L1 on valid bins (m)" if net == "depth" else "cross-entropy"
+        loss_ax.set_title(f"{NET_LABELS[net]}: {unit}")
+        loss_ax.set_ylabel("loss")
+        loss_ax.legend(fontsize=7, ncol=2)
+        std_ax.set_title(f"{NET_LABELS[net]}: std of the validation loss over a batch")
+        std_ax.set_xlabel("epoch (100 training batches of 64)")
+        std_ax.set_ylabel("std")
+        std_ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
