@@ -1,10 +1,17 @@
-"""Worker processes shared by collection and evaluation: spawned (EGL contexts do not survive a fork)."""
+"""Worker processes shared by collection and evaluation (spawned: EGL contexts do not survive a fork),
+and the core count that sizes thread pools."""
 
 from __future__ import annotations
 
+import os
 import queue
 from multiprocessing.process import BaseProcess
 from typing import Any
+
+
+def cores() -> int:
+    """The CPU cores this process may run on (its affinity, not the machine's count)."""
+    return len(os.sched_getaffinity(0))
 
 
 def next_result(results, procs: list[BaseProcess], what: str) -> Any:

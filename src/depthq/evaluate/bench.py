@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -10,6 +9,7 @@ import numpy as np
 import torch
 
 from depthq.control.qnet_policy import QNetPolicy
+from depthq.parallel import cores
 
 
 def bench_policy(checkpoint: Path | None = None, decisions: int = 200) -> dict:
@@ -22,7 +22,7 @@ def bench_policy(checkpoint: Path | None = None, decisions: int = 200) -> dict:
     from depthq.nets.trunk import build_trunk
     from depthq.sim.env import CanyonEnv
 
-    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_num_threads(cores())
     if checkpoint is not None:
         policy = QNetPolicy.from_checkpoint(Path(checkpoint))
     else:

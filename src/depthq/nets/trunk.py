@@ -85,11 +85,17 @@ TRUNKS: dict[str, TrunkSpec] = {
 }
 
 
-def build_trunk(name: str, pretrained: bool = True) -> Trunk:
-    """The trunk called `name`; `pretrained=False` skips loading weights (tests, shapes only)."""
+def trunk_spec(name: str) -> TrunkSpec:
+    """The spec of the trunk called `name`; an unknown name is a ConfigError listing the valid ones."""
     spec = TRUNKS.get(name)
     if spec is None:
         raise ConfigError(f"unknown trunk {name!r}; valid trunks: {', '.join(sorted(TRUNKS))}")
+    return spec
+
+
+def build_trunk(name: str, pretrained: bool = True) -> Trunk:
+    """The trunk called `name`; `pretrained=False` skips loading weights (tests, shapes only)."""
+    spec = trunk_spec(name)
     keep_freed_memory()  # a trunk allocates tens of MB per call: see depthq.nets.heap
     return Trunk(name, spec.build(pretrained), spec.feature_dim, spec.frozen)
 

@@ -82,12 +82,12 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
                 lambda r=ref, f=folder: evaluate(r, f, eval_config, preset.workers),
             )
         )
+    extra = {} if preset.epochs is None else {"epochs": preset.epochs}
     # Seed-major: an interrupted or still-running `paper` already holds a whole table for seed 0.
     for seed in preset.seeds:
         for n in preset.subsets:
             for net in NETS:
                 name = model_name(net, n, seed)
-                extra = {} if preset.epochs is None else {"epochs": preset.epochs}
                 config = TrainConfig(
                     model=net,
                     data=str(data),

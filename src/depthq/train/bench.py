@@ -4,7 +4,6 @@ extraction end to end (JPEG decode + resize + frozen trunk)."""
 from __future__ import annotations
 
 import itertools
-import os
 import time
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import build_trunk
+from depthq.parallel import cores
 from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig
 from depthq.train.features import BATCH as DECODE_BATCH
@@ -34,7 +34,7 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); the hidden layer's input
     gradient is never computed (features need none), so `ratio_actual` counts the work really done.
     """
-    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_num_threads(cores())
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
     config = TrainConfig(model="depth", data="-")

@@ -67,16 +67,20 @@ def build_qnet(config: TrainConfig) -> QNet:
     return QNet(build_trunk(config.trunk), build_head(head_config(config)))
 
 
+def _stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:
+    """The modules a checkpoint stores: the head, plus the trunk when it is trained."""
+    return [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
+
+
 def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
-    """The weights a checkpoint stores: the head's, plus the trunk's when it is trained."""
-    parts = [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
+    """The weights a checkpoint stores, named "<part>.<parameter>"."""
+    parts = _stored_parts(model)
     return {f"{name}.{k}": t.detach().contiguous() for name, m in parts for k, t in m.state_dict().items()}
 
 
 def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Path) -> None:
-    parts = [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
     try:
-        for name, module in parts:
+        for name, module in _stored_parts(model):
             prefix = f"{name}."
             module.load_state_dict({k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)})
     except RuntimeError as err:

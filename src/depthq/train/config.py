@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
 from depthq.nets.heads import HEAD_KINDS
+from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import INPUT_SIZE, TRUNKS
 
 # SPEC §1.6: Depth-Q-Net 0.1, Coll-Q-Net 0.01.
@@ -46,9 +47,9 @@ class TrainConfig:
     val_batches: int = 10
     batch_size: int = 64
     lr: float | None = None
-    rho: float = 0.95
-    eps: float = 1e-8
-    weight_decay: float = 4e-5
+    rho: float = RHO
+    eps: float = EPS
+    weight_decay: float = WEIGHT_DECAY
     trunk: str = "efficientnet_lite0"
     # The paper drops out 0.5 of the feature. On the frozen 1280-d EfficientNet-Lite0 feature that
     # makes eval-mode predictions far off the train-mode ones (L1 0.61 vs 0.26 m on the training

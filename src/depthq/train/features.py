@@ -38,7 +38,8 @@ from tqdm import tqdm
 from depthq.configio import provenance, read_json, write_json
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import ConfigError, DataError
-from depthq.nets.trunk import TRUNKS, Trunk, build_trunk, preprocess
+from depthq.nets.trunk import Trunk, build_trunk, preprocess, trunk_spec
+from depthq.parallel import cores
 
 FEATURES = "features"
 ARRAY = "features.f16.npy"
@@ -99,7 +100,7 @@ def load_features(dataset: Dataset, trunk: str, size: int, progress: bool = True
 def trunk_threads() -> int:
     """Threads for the trunk: every core. (Leaving one core to the JPEG-decoding thread was no faster
     on the 2-core reference machine: 333 frames/s end to end either way.)"""
-    return len(os.sched_getaffinity(0))
+    return cores()
 
 
 def features_ready(dataset: Dataset, trunk: str, size: int) -> bool:
@@ -142,9 +143,7 @@ def compute_features(
 
 def _index(dataset: Dataset, trunk: str, size: int) -> dict:
     """What index.json must say for the cache to be valid (minus the file's size)."""
-    spec = TRUNKS.get(trunk)
-    if spec is None:
-        raise ConfigError(f"unknown trunk {trunk!r}; valid trunks: {', '.join(sorted(TRUNKS))}")
+    spec = trunk_spec(trunk)
     runs, row = {}, 0
     for entry in dataset.entries():
         runs[entry.name] = [row, entry.n_frames]

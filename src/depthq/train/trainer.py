@@ -5,7 +5,6 @@ run, then a random frame of it", then `val_batches` fixed validation batches; a 
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -24,6 +23,7 @@ from depthq.nets.heads import QNet
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
+from depthq.parallel import cores
 from depthq.train import checkpoint
 from depthq.train.config import TrainConfig
 from depthq.train.features import dataset_fingerprint, load_features
@@ -52,7 +52,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     checkpoint.write_config(out, config, fingerprint)
 
-    torch.set_num_threads(len(os.sched_getaffinity(0)))
+    torch.set_num_threads(cores())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
