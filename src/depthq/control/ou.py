@@ -14,7 +14,12 @@ from depthq.errors import ConfigError
 
 @dataclass(frozen=True)
 class OUConfig:
-    """x_{t+1} = x_t + theta·(mu − x_t) + sigma·N(0, 1);  a_t = clip(scale·x_t, −1, 1)."""
+    """x_t = x_{t−1} + theta·(mu − x_{t−1}) + sigma·N(0, 1) from x_0 = 0;  command a_t = scale·x_t.
+
+    As in the original code (SPEC §1.3) the command is not clipped (stationary std ≈ 0.96 rad/s, up
+    to ≈ 3 rad/s) and the first one is already scale·N(0, 1); the stored label is clipped later
+    (`DataConfig.action_clip`), the robot's own limit is `WorldConfig.max_yaw_rate`.
+    """
 
     theta: float = 0.05
     mu: float = 0.0
@@ -43,9 +48,8 @@ class OUPolicy:
 
     def act(self, obs: Observation | None = None) -> float:
         c = self.config
-        action = float(np.clip(c.scale * self._x, -1.0, 1.0))
         self._x += c.theta * (c.mu - self._x) + c.sigma * float(self._rng.standard_normal())
-        return action
+        return c.scale * self._x
 
     def describe(self) -> dict[str, Any]:
         return {"policy": self.name, "config": to_dict(self.config)}

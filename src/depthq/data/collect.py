@@ -1,5 +1,9 @@
 """Data collection (SPEC §1.3): OU exploration runs in fresh canyons, written as a run dataset.
 
+As in the original recorder: the OU command drives the robot unclipped (up to the TurtleBot3's
+2.84 rad/s), the bump check runs from the first step, the first `skip_frames` frames of every run
+are driven but not saved, and a run ends at a bump or after `env.time_limit_s` (50 s).
+
 Run `i` of split `s` depends on (seed, s, i) alone: it drives canyon `s:i` (the `train` or `val`
 canyon stream, disjoint from each other and from the evaluation canyons) with sensor noise and OU
 noise seeded from `SeedSequence(seed, spawn_key=(split, i))`. So the stored arrays are the same
@@ -28,6 +32,20 @@ from depthq.errors import ConfigError
 from depthq.parallel import next_result
 from depthq.sim.canyon import CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig
+
+MAX_DURATION_S = 50.0  # the original's max_duration of a collection run
+SKIP_FRAMES = 9  # the original did not save the first 9 frames of a run (skip_first=8)
+
+
+def exploration_env(
+    decision_hz: float = DEFAULT_DECISION_HZ, max_duration_s: float = MAX_DURATION_S
+) -> EnvConfig:
+    """The collection env: the OU command is applied up to the robot's own limit, not clipped to ±1."""
+    return EnvConfig(
+        world=WorldConfig(decision_hz=decision_hz, max_yaw_rate=TURTLEBOT3_MAX_YAW_RATE),
+        time_limit_s=max_duration_s,
+    )
 
 
 @dataclass(frozen=True)
@@ -36,8 +54,9 @@ class CollectConfig:
 
     runs: int = 900
     val_runs: int = 90
-    max_steps: int = 600  # a run that never bumps is cut here ("step_limit"); 60 s at 10 Hz
-    env: EnvConfig = field(default_factory=lambda: EnvConfig(time_limit_s=1e9))
+    max_steps: int = 600  # a hard cap on steps per run ("step_limit"), beside env.time_limit_s
+    skip_frames: int = SKIP_FRAMES
+    env: EnvConfig = field(default_factory=exploration_env)
     ou: OUConfig = field(default_factory=OUConfig)
     data: DataConfig = field(default_factory=DataConfig)
 
@@ -48,6 +67,8 @@ class CollectConfig:
             raise ConfigError(f"--val-runs must be >= 0, got {self.val_runs}")
         if self.max_steps < 1:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
+        if self.skip_frames < 0:
+            raise ConfigError(f"skip_frames must be >= 0, got {self.skip_frames}")
 
 
 def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:
@@ -58,20 +79,27 @@ def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:
 
 
 def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, index: int) -> Run:
-    """Drive one OU run until a bump, a contact or `max_steps`; every observation is a frame."""
+    """Drive one OU run until a bump, a contact, the time limit or `max_steps`.
+
+    Every observation is a frame but the first `skip_frames`; a stored action is the yaw rate the
+    robot was commanded after its frame (unclipped: labels clip it, `DataConfig.action_clip`).
+    """
     env_seed, policy_seed = run_seeds(seed, split, index)
     canyon = CanyonId(split, index)
     policy = OUPolicy(config.ou, seed=policy_seed)
+    limit = config.env.world.max_yaw_rate
     obs, info = env.reset(seed=env_seed, options={"canyon": canyon})
     frames, actions, end_reason = [(obs, info)], [], "step_limit"
     for _ in range(config.max_steps):
-        actions.append(policy.act(obs))
+        actions.append(float(np.clip(policy.act(obs), -limit, limit)))
         obs, _, terminated, truncated, info = env.step(np.array([actions[-1]], np.float32))
         frames.append((obs, info))
         if terminated or truncated:
             end_reason = info["end_reason"]
             break
     actions.append(np.nan)  # the last frame is where the run ended: no action
+    keep = min(config.skip_frames, len(frames) - 1)  # a run that ended while skipping keeps its last frame
+    frames, actions = frames[keep:], actions[keep:]
     meta = RunMeta(
         split=split,
         index=index,

@@ -1,9 +1,14 @@
-"""Which frames of a run are training samples, and their collision labels (SPEC §1.4). Pure NumPy.
+"""Which frames of a run are training samples, and their labels (SPEC §1.4). Pure NumPy.
 
-Frames 0..N-2 have an action, so they are the samples; frame N-1 is where the run ended. A run
-that ended in a collision labels its last `horizon` samples 1 (Coll-Q-Net's target); Depth-Q-Net's
-target for sample t is the next frame's bins, d_{t+1} = bins[t + 1], and it drops those same last
-`horizon` samples so it never learns from collisions.
+Frames 0..N-2 have an action, so they are the samples; frame N-1 is where the run ended. The
+last `horizon` samples of a run are labelled 1 (Coll-Q-Net's target) if the run's end counts as a
+collision: every run's end in the original (its clean-up script labelled them all), or only a
+bump's (`every_run_end=False`). Depth-Q-Net's target for sample t is the next frame's bins,
+d_{t+1} = bins[t + 1], and it drops those same last `horizon` samples.
+
+`action_lag` = 1 labels frame t with the command computed from frame t−1 (what the original
+recorder most likely stored: recorder and controller were separate processes); frame 0 then has
+no label and is not a sample.
 """
 
 from __future__ import annotations
@@ -21,22 +26,29 @@ def usable(meta: RunMeta, min_frames: int = MIN_FRAMES) -> bool:
     return meta.n_frames >= min_frames
 
 
-def coll_sample_indices(n_frames: int) -> np.ndarray:
-    """Coll-Q-Net's samples: every frame with an action, 0..N-2."""
-    return np.arange(max(n_frames - 1, 0), dtype=np.int64)
+def labelled_collision(meta: RunMeta, every_run_end: bool) -> bool:
+    """Whether the run's last `horizon` samples get collision labels."""
+    return every_run_end or meta.collision
 
 
-def collision_labels(n_frames: int, ended_in_collision: bool, horizon: int = HORIZON) -> np.ndarray:
-    """y_t for t = 0..N-2: 1 for the last `horizon` of them if the run ended in a collision, else 0."""
-    labels = np.zeros(max(n_frames - 1, 0), dtype=np.float32)
-    if ended_in_collision:
-        labels[max(len(labels) - horizon, 0) :] = 1.0
-    return labels
+def coll_sample_indices(n_frames: int, action_lag: int = 0) -> np.ndarray:
+    """Coll-Q-Net's samples: every frame with an action label, action_lag..N-2."""
+    return np.arange(min(action_lag, n_frames), max(n_frames - 1, 0), dtype=np.int64)
 
 
-def depth_sample_indices(n_frames: int, ended_in_collision: bool, horizon: int = HORIZON) -> np.ndarray:
-    """Depth-Q-Net's samples t (target bins[t + 1]): 0..N-2, without the last `horizon` of a collision run."""
-    n_samples = max(n_frames - 1, 0)
-    if ended_in_collision:
-        n_samples = max(n_samples - horizon, 0)
-    return np.arange(n_samples, dtype=np.int64)
+def collision_labels(
+    n_frames: int, ended_in_collision: bool, horizon: int = HORIZON, action_lag: int = 0
+) -> np.ndarray:
+    """y_t for Coll-Q-Net's samples: 1 for the last `horizon` of them if the run ended in a collision."""
+    t = coll_sample_indices(n_frames, action_lag)
+    if not ended_in_collision:
+        return np.zeros(len(t), dtype=np.float32)
+    return (t >= n_frames - 1 - horizon).astype(np.float32)
+
+
+def depth_sample_indices(
+    n_frames: int, ended_in_collision: bool, horizon: int = HORIZON, action_lag: int = 0
+) -> np.ndarray:
+    """Depth-Q-Net's samples t (target bins[t + 1]), without the last `horizon` of a collision run."""
+    t = coll_sample_indices(n_frames, action_lag)
+    return t[t < n_frames - 1 - horizon] if ended_in_collision else t

@@ -24,7 +24,12 @@ from torch.utils.data import Dataset as TorchDataset
 from torch.utils.data import Sampler
 
 from depthq.data import DataConfig
-from depthq.data.labels import coll_sample_indices, collision_labels, depth_sample_indices
+from depthq.data.labels import (
+    coll_sample_indices,
+    collision_labels,
+    depth_sample_indices,
+    labelled_collision,
+)
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.runfile import RunReader
 from depthq.data.subsets import select_runs
@@ -40,7 +45,8 @@ def view_arrays(
 
     Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
-    `frame_id` (t), `action` (a_t), and `target`: bins[t + 1] (S, 26) for "depth", y_t (S,) for "coll".
+    `frame_id` (t), `action` (a_t: the stored command of frame t − action_lag, clipped to
+    ±action_clip), and `target`: bins[t + 1] (S, 26) for "depth", y_t (S,) for "coll".
     """
     if kind not in KINDS:
         raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
@@ -51,14 +57,15 @@ def view_arrays(
     frame_ids, actions, targets = [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
+        ended = labelled_collision(entry, config.every_run_end)
         if kind == "depth":
-            t = depth_sample_indices(run.n_frames, entry.collision, config.horizon)
+            t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
             target = run.bins[t + 1]
         else:
-            t = coll_sample_indices(run.n_frames)
-            target = collision_labels(run.n_frames, entry.collision, config.horizon)
+            t = coll_sample_indices(run.n_frames, config.action_lag)
+            target = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
         frame_ids.append(t)
-        actions.append(run.actions[t])
+        actions.append(np.clip(run.actions[t - config.action_lag], -config.action_clip, config.action_clip))
         targets.append(target)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
     run_index = np.array([entry.index for entry in runs], dtype=np.int64)

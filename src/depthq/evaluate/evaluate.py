@@ -10,7 +10,7 @@ import csv
 import io
 import multiprocessing as mp
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,8 @@ from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE, distance_from_spawn, imitation_loss, summarize
 from depthq.parallel import next_result
 from depthq.sim.canyon import N_EVAL_CANYONS, CanyonId
+from depthq.sim.env import EnvConfig
+from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig
 
 RUN_FIELDS = (
     "canyon",
@@ -44,21 +46,44 @@ class EvalConfig:
     time_limit_s: float = 45.0
     seed: int = 0  # sensor noise: canyon i uses seed + i
     which: str = "best"  # checkpoint weights to load
+    # One decision per camera frame. None: the rate of a checkpoint's training data (else the default).
+    decision_hz: float | None = None
 
     def __post_init__(self) -> None:
         for c in self.canyons:
             CanyonId.parse(c)
+        _ = self.env  # checks the rate
         if not self.time_limit_s > 0:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
         if self.which not in ("best", "last"):
             raise ConfigError(f"--which must be 'best' or 'last', got {self.which!r}")
 
 
+    @property
+    def env(self) -> EnvConfig:
+        world = WorldConfig() if self.decision_hz is None else WorldConfig(decision_hz=self.decision_hz)
+        return EnvConfig(world=world, time_limit_s=self.time_limit_s)
+
+
+def data_rate(policy_spec: str) -> float:
+    """The decision rate of a checkpoint's training data; the default rate for any other policy."""
+    from depthq.data.manifest import Dataset
+    from depthq.train.checkpoint import read_config
+
+    if not Path(policy_spec).is_dir():
+        return DEFAULT_DECISION_HZ
+    data = Path(read_config(Path(policy_spec))["train"]["data"])
+    return float(Dataset.open(data).config["env"]["world"]["decision_hz"])
+
+
 def parse_canyon_set(text: str) -> tuple[str, ...]:
-    """'eval' (all 20), 'eval:0-4' (a range) or 'eval:2,7' (a list) → canyon ids."""
+    """'eval' (all 20), 'eval:0-4' (a range), 'eval:2,7' (a list) or a range of `val` canyons
+    ('val:1000-1019'; design choices are made there, the `eval` canyons are the test set)."""
     stream, _, which = text.partition(":")
-    if stream != "eval":
-        raise ConfigError(f"unknown canyon set {text!r}: evaluation uses 'eval', 'eval:0-4' or 'eval:2,7'")
+    if stream not in ("eval", "val") or (stream == "val" and not which):
+        raise ConfigError(
+            f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
+        )
     if not which:
         return tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
     try:
@@ -68,10 +93,10 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
         else:
             indices = [int(v) for v in which.split(",")]
     except ValueError:
-        raise ConfigError(f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4' or 'eval:2,7'") from None
+        raise ConfigError(f"unknown canyon set {text!r}: expected e.g. 'eval:0-4', 'val:1000-1019'") from None
     if not indices:
         raise ConfigError(f"canyon set {text!r} is empty")
-    return tuple(str(CanyonId("eval", i)) for i in indices)
+    return tuple(str(CanyonId(stream, i)) for i in indices)
 
 
 def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> dict[str, Any]:
@@ -85,7 +110,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> d
     while not done:
         expert_actions.append(expert.act(obs))
         t0 = time.perf_counter()
-        action = policy.act(obs)
+        action = float(np.clip(policy.act(obs), env.action_space.low[0], env.action_space.high[0]))
         ms.append((time.perf_counter() - t0) * 1e3)
         values = getattr(policy, "last_values", None)
         before = obs
@@ -128,11 +153,11 @@ def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
 
     from depthq.control.heuristic import DepthHeuristic
     from depthq.control.registry import make_policy
-    from depthq.sim.env import CanyonEnv, EnvConfig
+    from depthq.sim.env import CanyonEnv
 
     torch.set_num_threads(1)  # same float sums in every process: results independent of W
     policy = make_policy(policy_spec, seed=config.seed, which=config.which)
-    env, expert = CanyonEnv(EnvConfig(time_limit_s=config.time_limit_s)), DepthHeuristic()
+    env, expert = CanyonEnv(config.env), DepthHeuristic()
     try:
         while (task := tasks.get()) is not None:
             k, canyon = task
@@ -153,6 +178,8 @@ def evaluate(
     from depthq.control.registry import make_policy
 
     description = make_policy(policy_spec, seed=config.seed, which=config.which).describe()  # fails early
+    if config.decision_hz is None:
+        config = replace(config, decision_hz=data_rate(policy_spec))
     ctx = mp.get_context("spawn")
     tasks, results = ctx.Queue(), ctx.Queue()
     for task in enumerate(config.canyons):

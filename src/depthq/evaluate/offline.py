@@ -1,5 +1,5 @@
 """Table I's offline columns: a checkpoint's loss on every validation sample of its dataset —
-mean absolute difference on valid bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net)."""
+the training loss: absolute difference on the near bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,14 @@ from typing import Any
 import numpy as np
 import torch
 
+from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
-from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.trunk import preprocess
 from depthq.train.checkpoint import load_qnet
+from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
+from depthq.train.trainer import loss_function
 
 METRICS = {"depth": "abs_diff", "coll": "cross_entropy"}
 
@@ -26,7 +28,8 @@ def offline_metric(checkpoint: Path, which: str = "best") -> dict[str, Any]:
     train = config["train"]
     kind = train["model"]
     dataset = Dataset.open(Path(train["data"]))
-    arrays = view_arrays(dataset, "val", None, kind=kind)
+    train_config = from_dict(TrainConfig, train)
+    arrays = view_arrays(dataset, "val", None, kind=kind, config=train_config.labels())
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
     targets = torch.from_numpy(np.asarray(arrays["target"], np.float32))
     size = int(train["input_size"])
@@ -35,7 +38,7 @@ def offline_metric(checkpoint: Path, which: str = "best") -> dict[str, Any]:
     else:  # the trunk was trained with the head: run it on the frames themselves
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
-    loss, _ = depth_l1_loss(outputs, targets) if kind == "depth" else coll_bce_loss(outputs, targets)
+    loss, _ = loss_function(train_config)(outputs, targets)
     return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": which}
 
 

@@ -10,6 +10,7 @@ from depthq.errors import ConfigError
 
 DEPTH_CLIP = 2.0  # metres; SPEC §1.2
 CLIP_TOLERANCE = 1e-6  # a target within this of the clip counts as "at the clip" (float32 round-off)
+DEPTH_LOSSES = ("original", "valid_mean")
 
 
 def depth_valid_mask(target: torch.Tensor, clip: float = DEPTH_CLIP) -> torch.Tensor:
@@ -18,11 +19,15 @@ def depth_valid_mask(target: torch.Tensor, clip: float = DEPTH_CLIP) -> torch.Te
 
 
 def depth_l1_loss(
-    pred: torch.Tensor, target: torch.Tensor, clip: float = DEPTH_CLIP
+    pred: torch.Tensor, target: torch.Tensor, clip: float = DEPTH_CLIP, reduction: str = "original"
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """L1 over valid bins → (batch loss, per-sample loss (B,)).
 
-    The batch loss is the mean absolute error over all valid bins of the batch (sum / count), so
+    "original" is the authors' loss (SPEC §1.4): weight 1 where 0.001 < target < clip, then a
+    2-wide min-pool of the weights (a bin next to an excluded one on its right is dropped too),
+    and the weighted L1 averaged over all bins; the batch loss is the mean of the samples'.
+
+    "valid_mean": the batch loss is the mean absolute error over all valid bins of the batch (sum / count), so
     every valid bin weighs the same whatever sample it is in: a sample with 3 near bins does not
     count as much as one with 26. A sample's own loss is the mean over its valid bins, 0 when it
     has none. A batch with no valid bin gives 0 (with a graph, so `backward` still works).
@@ -31,6 +36,13 @@ def depth_l1_loss(
         raise ConfigError(
             f"depth_l1_loss: pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be (B, bins)"
         )
+    if reduction not in DEPTH_LOSSES:
+        raise ConfigError(f"depth loss must be one of {DEPTH_LOSSES}, got {reduction!r}")
+    if reduction == "original":
+        weight = (depth_valid_mask(target, clip) & (target > 0.001)).to(pred.dtype)
+        weight = torch.cat([torch.minimum(weight[:, :-1], weight[:, 1:]), weight[:, -1:]], dim=1)
+        per_sample = (weight * (pred - torch.where(weight > 0, target, 0.0)).abs()).mean(dim=1)
+        return per_sample.mean(), per_sample
     valid = depth_valid_mask(target, clip)
     # Zero the invalid targets before subtracting: a NaN would poison the gradient even where masked.
     errors = torch.where(valid, (pred - torch.where(valid, target, 0.0)).abs(), 0.0)

@@ -50,7 +50,7 @@ def _eval_done(folder: Path) -> bool:
 
 def build_stages(preset: Preset, out: Path) -> list[Stage]:
     """The pipeline as an ordered list of resumable stages."""
-    from depthq.data.collect import CollectConfig, collect, collection_complete
+    from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
     from depthq.data.manifest import Dataset
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
     from depthq.train.checkpoint import saved_epoch
@@ -59,8 +59,17 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
     from depthq.train.trainer import train
 
     data = out / "data"
-    collect_config = CollectConfig(runs=preset.runs, val_runs=preset.val_runs, max_steps=preset.max_steps)
-    eval_config = EvalConfig(canyons=parse_canyon_set(preset.canyons), time_limit_s=preset.time_limit_s)
+    collect_config = CollectConfig(
+        runs=preset.runs,
+        val_runs=preset.val_runs,
+        max_steps=preset.max_steps,
+        env=exploration_env(preset.decision_hz),
+    )
+    eval_config = EvalConfig(
+        canyons=parse_canyon_set(preset.canyons),
+        time_limit_s=preset.time_limit_s,
+        decision_hz=preset.decision_hz,
+    )
     stages = [
         Stage(
             "collect",

@@ -15,15 +15,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--max-steps", type=int, default=600, help="cut a run that never bumps after this many steps"
     )
+    p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.data.collect import CollectConfig, collect
+    from depthq.data.collect import CollectConfig, collect, exploration_env
     from depthq.data.stats import dataset_stats, format_stats
 
-    config = CollectConfig(runs=args.runs, val_runs=args.val_runs, max_steps=args.max_steps)
+    env = exploration_env() if args.hz is None else exploration_env(args.hz)
+    config = CollectConfig(runs=args.runs, val_runs=args.val_runs, max_steps=args.max_steps, env=env)
     start = time.perf_counter()
     dataset = collect(args.out, config, args.seed, workers=args.workers, overwrite=args.overwrite)
     elapsed = time.perf_counter() - start

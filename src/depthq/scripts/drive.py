@@ -17,6 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seed", type=int, default=0, help="sensor-noise and policy seed")
     p.add_argument("--time-limit", type=float, default=45.0, help="seconds before the run is cut")
+    p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
     p.add_argument("--frames", type=int, default=4, help="camera frames to save, evenly spaced")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON line")
 
@@ -26,12 +27,14 @@ def run(args: argparse.Namespace) -> int:
 
     from depthq.control.registry import make_policy
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
+    from depthq.sim.world import WorldConfig
 
     canyon = parse_canyon(args.canyon)
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     policy = make_policy(args.policy, seed=args.seed)
-    env = CanyonEnv(EnvConfig(time_limit_s=args.time_limit))
+    world = WorldConfig() if args.hz is None else WorldConfig(decision_hz=args.hz)
+    env = CanyonEnv(EnvConfig(world=world, time_limit_s=args.time_limit))
     try:
         obs, info = env.reset(seed=args.seed, options={"canyon": canyon})
         policy.reset(args.seed)

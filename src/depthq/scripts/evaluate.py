@@ -9,7 +9,13 @@ from pathlib import Path
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="'heuristic', 'ou' or a checkpoint folder")
-    p.add_argument("--canyons", default="eval", help="'eval' (all 20), 'eval:0-4' or 'eval:2,7'")
+    p.add_argument(
+        "--canyons", default="eval", help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
+    )
+    p.add_argument(
+        "--hz", type=float, default=None,
+        help="decisions per second [a checkpoint's: its training data's; else the calibrated default]",
+    )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--time-limit", type=float, default=45.0, help="seconds per run")
@@ -22,7 +28,11 @@ def run(args: argparse.Namespace) -> int:
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 
     config = EvalConfig(
-        canyons=parse_canyon_set(args.canyons), time_limit_s=args.time_limit, seed=args.seed, which=args.which
+        canyons=parse_canyon_set(args.canyons),
+        time_limit_s=args.time_limit,
+        seed=args.seed,
+        which=args.which,
+        decision_hz=args.hz,
     )
     result = evaluate(args.policy, args.out, config, workers=args.workers)
     s = result["summary"]

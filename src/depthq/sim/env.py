@@ -4,7 +4,8 @@ contact with a wall or the time limit. Gymnasium env `depthq/Canyon-v0`.
 Observation: {"image": uint8 (308, 410, 3) camera frame with pixel noise,
               "scan": float32 (360,) LiDAR (index = bearing in degrees, CCW; inf = nothing in range,
                       0 = invalid), "bins": float32 (26,) depth bins left→right (NaN = invalid)}.
-Action: yaw rate in rad/s, shape (1,), clipped to [−1, 1]; +a turns left.
+Action: yaw rate in rad/s, shape (1,), clipped to ±`world.max_yaw_rate` (1 by default); +a turns left.
+One step is one camera frame: `world.decision_hz` decisions per second.
 Reward: metres gained on the furthest straight-line distance from the spawn point (what Table I measures).
 """
 
@@ -57,7 +58,11 @@ class CanyonEnv(gym.Env):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None) -> None:
+    def __init__(
+        self, config: EnvConfig | None = None, render_mode: str | None = None, camera: bool = True
+    ) -> None:
+        """`camera=False` skips rendering (the image stays black): run statistics and the LiDAR
+        oracle need no pixels and run ~10× faster."""
         self.config = config or EnvConfig()
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"unknown render_mode {render_mode!r}; expected None or 'rgb_array'")
@@ -70,9 +75,12 @@ class CanyonEnv(gym.Env):
                 "bins": spaces.Box(0.0, self.config.bins.clip, (self.config.bins.n_bins,), np.float32),
             }
         )
-        self.action_space = spaces.Box(-1.0, 1.0, (1,), np.float32)
-        self.world = CanyonWorld(self.config.world)
-        self.dt = 1.0 / self.config.world.decision_hz
+        limit = self.config.world.max_yaw_rate
+        self.action_space = spaces.Box(-limit, limit, (1,), np.float32)
+        self.world = CanyonWorld(self.config.world, render=camera)
+        self._black = None if camera else np.zeros(self.observation_space["image"].shape, np.uint8)
+        self.dt = self.config.world.period
+        self.metadata = {**self.metadata, "render_fps": self.config.world.decision_hz}
         self.canyon_id: CanyonId | None = None
         self.trajectory: list[np.ndarray] = []
         self._obs: dict[str, np.ndarray] | None = None
@@ -104,7 +112,8 @@ class CanyonEnv(gym.Env):
         a = np.asarray(action, dtype=np.float64).reshape(-1)
         if a.size != 1 or not np.isfinite(a[0]):
             raise ConfigError(f"action must be one finite yaw rate, got {action!r}")
-        yaw_rate = float(np.clip(a[0], -1.0, 1.0)) * self.config.world.max_yaw_rate
+        limit = self.config.world.max_yaw_rate
+        yaw_rate = float(np.clip(a[0], -limit, limit))
         before = self.world.pose
         contact = self.world.advance(yaw_rate)
         self.time = round(self.time + self.dt, 9)
@@ -127,7 +136,7 @@ class CanyonEnv(gym.Env):
     def _observe(self) -> dict[str, np.ndarray]:
         scan = self.world.scan(self.np_random)
         return {
-            "image": self.world.image(self.np_random),
+            "image": self.world.image(self.np_random) if self._black is None else self._black,
             "scan": scan,
             "bins": depth_bins(scan, self.config.bins),
         }

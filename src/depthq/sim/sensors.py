@@ -39,12 +39,17 @@ class LidarConfig:
 
 @dataclass(frozen=True)
 class BinConfig:
-    """The 26 depth bins: 104 readings from +51° to −52°, clipped at 2 m, averaged in groups of 4."""
+    """The 26 depth bins: 104 readings from +51° to −52°, clipped at 2 m, averaged in groups of 4.
+
+    `invalid_as_far`: the original recorder stored a reading of 0 or no return as 5 m, so after the
+    clip it is far, never invalid (SPEC §1.2). False keeps such readings out of the mean (NaN bins).
+    """
 
     first_bearing: int = 51
     n_readings: int = 104
     group: int = 4
     clip: float = 2.0
+    invalid_as_far: bool = True
 
     @property
     def n_bins(self) -> int:
@@ -53,13 +58,17 @@ class BinConfig:
 
 @dataclass(frozen=True)
 class BumpConfig:
-    """A bump ends a run: readings within ±45°, clipped at 1 m, averaged in groups of 4, min < 0.2 m."""
+    """A bump ends a run: readings within ±45°, clipped at 1 m, averaged in groups of 4, min < 0.2 m.
+
+    Checked from the first step: in the original the robot stood still for 1 s, then driving and the
+    bump check started together (`grace_s` > 0 delays the check after the start of driving).
+    """
 
     half_angle: int = 45
     group: int = 4
     clip: float = 1.0
     threshold: float = 0.2
-    grace_s: float = 1.0
+    grace_s: float = 0.0
 
 
 def ray_directions(n_rays: int = N_RAYS) -> np.ndarray:
@@ -101,11 +110,16 @@ def _group_mean(readings: np.ndarray, clip: float, group: int) -> np.ndarray:
 
 
 def depth_bins(scan: np.ndarray, config: BinConfig = BinConfig()) -> np.ndarray:
-    """The 26 depth bins (left to right) of a scan (..., 360); NaN marks a bin with no valid reading."""
+    """The 26 depth bins (left to right) of a scan (..., 360).
+
+    With `invalid_as_far` (the original) an invalid reading counts as the clip; otherwise it is left
+    out of its bin's mean, and NaN marks a bin with no valid reading.
+    """
     idx = _bearings_left_to_right(config.first_bearing, config.n_readings)
-    return _group_mean(np.asarray(scan, dtype=np.float64)[..., idx], config.clip, config.group).astype(
-        np.float32
-    )
+    readings = np.asarray(scan, dtype=np.float64)[..., idx]
+    if config.invalid_as_far:
+        readings = np.where(np.isnan(readings) | (readings <= 0), np.inf, readings)
+    return _group_mean(readings, config.clip, config.group).astype(np.float32)
 
 
 def bump(scan: np.ndarray, config: BumpConfig = BumpConfig()) -> bool:

@@ -25,6 +25,9 @@ from depthq.sim.mjcf import (
 from depthq.sim.sensors import LidarConfig, finish_scan, ray_directions
 
 APPEARANCES = ("default", "randomized")
+NOMINAL_DECISION_HZ = 10.0  # the TurtleBot3 camera's nominal frame rate (SPEC §1.2)
+DEFAULT_DECISION_HZ = 4.0  # calibrated against Table II's frames per run (docs/calibration.md)
+TURTLEBOT3_MAX_YAW_RATE = 2.84  # rad/s, the Burger's maximum angular velocity
 
 
 @dataclass(frozen=True)
@@ -36,8 +39,10 @@ class WorldConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
     speed: float = 0.5  # m/s, constant
-    max_yaw_rate: float = 1.0  # rad/s; actions are clipped to ±this
-    decision_hz: float = 10.0
+    max_yaw_rate: float = 1.0  # rad/s; commanded yaw rates are clipped to ±this
+    # One decision per camera frame. The original camera is nominally 10 Hz, but the rate at which
+    # its frames were really saved is unknown; DEFAULT_DECISION_HZ is calibrated to Table II (README).
+    decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005
     appearance: str = "default"
 
@@ -51,9 +56,10 @@ class WorldConfig:
         if not 0 < self.physics_dt <= 0.005:
             raise ConfigError(f"physics_dt must lie in (0, 0.005] s, got {self.physics_dt}")
         substeps = 1.0 / (self.decision_hz * self.physics_dt)
-        if abs(substeps - round(substeps)) > 1e-6:
+        if substeps < 0.5 or abs(substeps - round(substeps)) > 0.05:
             raise ConfigError(
-                f"1/decision_hz must be a multiple of physics_dt, got {self.decision_hz}, {self.physics_dt}"
+                f"1/decision_hz must be a multiple of physics_dt ({self.physics_dt} s), got decision_hz "
+                f"{self.decision_hz} (a period of {1 / self.decision_hz:.4f} s)"
             )
         if self.appearance not in APPEARANCES:
             raise ConfigError(f"unknown appearance {self.appearance!r}; expected one of {APPEARANCES}")
@@ -61,6 +67,11 @@ class WorldConfig:
     @property
     def substeps(self) -> int:
         return round(1.0 / (self.decision_hz * self.physics_dt))
+
+    @property
+    def period(self) -> float:
+        """Seconds between two decisions (camera frames): a whole number of physics steps."""
+        return self.substeps * self.physics_dt
 
 
 def _noise_table(std_levels: float) -> np.ndarray:

@@ -119,7 +119,7 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
         if any(out.iterdir()):
             raise ConfigError(f"--out {out}: exists, is not empty and holds no training ({CONFIG} missing)")
         return False
-    old = _read_config(out)
+    old = read_config(out)
     ignore = {"epochs", "data"}
     old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
     new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
@@ -227,7 +227,7 @@ def load_qnet(
         raise ConfigError(f"checkpoint weights must be one of {WHICH}, got {which!r}")
     if not folder.is_dir():
         raise ConfigError(f"{folder}: no such checkpoint folder")
-    record = _read_config(folder)
+    record = read_config(folder)
     config = from_dict(TrainConfig, record.get("train", {}))
     if record.get("head", {}).get("kind") not in HEAD_KINDS or config.model != record["head"]["kind"]:
         raise ConfigError(f"{folder / CONFIG}: unknown model kind {record.get('head', {}).get('kind')!r}")
@@ -242,7 +242,7 @@ def load_qnet(
     return net.eval(), record
 
 
-def _read_config(folder: Path) -> dict[str, Any]:
+def read_config(folder: Path) -> dict[str, Any]:
     path = folder / CONFIG
     if not path.is_file():
         raise ConfigError(f"{folder}: not a checkpoint folder (no {CONFIG})")

@@ -5,9 +5,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from depthq.data import DataConfig
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
 from depthq.nets.heads import HEAD_KINDS
+from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import INPUT_SIZE, TRUNKS
 
@@ -57,8 +59,13 @@ class TrainConfig:
     # (0.25), 0.61 (0.5). Hence 0 by default; set 0.5 for the paper's value.
     dropout: float = 0.0
     input_size: int = INPUT_SIZE
+    depth_loss: str = "original"  # `depthq.nets.losses.depth_l1_loss`
+    # Labels (`depthq.data.labels`); the defaults are the original's.
     horizon: int = HORIZON
     min_frames: int = MIN_FRAMES
+    every_run_end: bool = True
+    action_clip: float = 1.0
+    action_lag: int = 0
 
     def __post_init__(self) -> None:
         if self.model not in HEAD_KINDS:
@@ -72,6 +79,7 @@ class TrainConfig:
             _int_at_least(name, getattr(self, name), 1)
         _int_at_least("horizon", self.horizon, 1)
         _int_at_least("min_frames", self.min_frames, self.horizon + 2)
+        _int_at_least("action_lag", self.action_lag, 0)
         if self.lr is not None:
             _positive_float("lr", self.lr)
         _positive_float("eps", self.eps)
@@ -81,6 +89,19 @@ class TrainConfig:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
         if self.trunk not in TRUNKS:
             raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
+        if self.depth_loss not in DEPTH_LOSSES:
+            raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
+        self.labels()  # checks the label fields
+
+    def labels(self) -> DataConfig:
+        """How the dataset's runs become this training's samples."""
+        return DataConfig(
+            horizon=self.horizon,
+            min_frames=self.min_frames,
+            every_run_end=self.every_run_end,
+            action_clip=self.action_clip,
+            action_lag=self.action_lag,
+        )
 
     @property
     def learning_rate(self) -> float:

@@ -4,6 +4,7 @@ run, then a random frame of it", then `val_batches` fixed validation batches; a 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -15,7 +16,6 @@ from torch.optim import Optimizer
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
-from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.views import CollView, DepthView, view_arrays
 from depthq.errors import ConfigError
@@ -60,7 +60,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     model = checkpoint.build_qnet(config)
     c = config
     optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
-    loss_fn = depth_l1_loss if config.model == "depth" else coll_bce_loss
+    loss_fn = loss_function(config)
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
     val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
@@ -108,6 +108,12 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     return out
 
 
+def loss_function(config: TrainConfig) -> LossFn:
+    if config.model == "coll":
+        return coll_bce_loss
+    return functools.partial(depth_l1_loss, reduction=config.depth_loss)
+
+
 def train_step(model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, optimizer: Optimizer) -> float:
     """One Adadelta step on `batch`; returns its loss. A non-finite loss is returned without a step."""
     loss, _ = loss_fn(samples.predict(model, batch), batch.targets)
@@ -121,7 +127,7 @@ def train_step(model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, opt
 
 def _samples(config: TrainConfig, dataset: Dataset, progress: bool) -> tuple[Samples, Samples]:
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
-    data = DataConfig(horizon=config.horizon, min_frames=config.min_frames)
+    data = config.labels()
     if TRUNKS[config.trunk].frozen:
         arrays = {split: view_arrays(dataset, split, n, config.model, data)
                   for split, n in (("train", config.runs), ("val", None))}

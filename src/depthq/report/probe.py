@@ -1,0 +1,184 @@
+"""The fidelity probe: how close our exploration data and our world are to the original's, fast.
+
+Three parts, each on the `train` and `val` canyon streams only (the `eval` canyons are the test set):
+
+- `stats`: OU exploration runs without a camera (the LiDAR decides when a run ends), at each
+  candidate decision rate: frames per kept run, the share of runs kept, and the samples that
+  Table II's sizes would get, next to the paper's. This is how the decision rate is calibrated.
+- `oracle`: the selection rule of SPEC §1.7 fed with the simulator's true next bins for each
+  candidate action (a perfect Depth-Q-Net), driven in `val` canyons: what the rule can reach at
+  a rate, whatever the network.
+- `dqn`: a small dataset collected at a rate, one Depth-Q-Net (and one Coll-Q-Net) trained on it
+  and driven in `val` canyons: the end-to-end check, in a few minutes.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from depthq.data.labels import HORIZON, MIN_FRAMES
+from depthq.data.stats import PAPER_TABLE2
+from depthq.errors import ConfigError
+
+PARTS = ("stats", "oracle", "dqn")
+VAL_CANYONS = "val:1000-1019"  # far from the validation runs' canyons (val:0..89)
+ACTIONS = np.array([-1.0, 0.0, 1.0])
+PAPER_FRAMES_PER_RUN = sum(s for s, _ in PAPER_TABLE2.values()) / sum(PAPER_TABLE2) + 1
+
+
+def ou_statistics(decision_hz: float, runs: int, seed: int = 0, max_yaw_rate: float | None = None) -> dict:
+    """Table II statistics of `runs` OU runs in the first `runs` training canyons, at `decision_hz`."""
+    from depthq.data.collect import CollectConfig, collect_run, exploration_env
+    from depthq.sim.env import CanyonEnv
+
+    env_config = exploration_env(decision_hz)
+    if max_yaw_rate is not None:
+        env_config = replace(env_config, world=replace(env_config.world, max_yaw_rate=max_yaw_rate))
+    config = CollectConfig(runs=runs, val_runs=0, env=env_config)
+    env = CanyonEnv(env_config, camera=False)
+    lengths, bumped = [], []
+    try:
+        for index in range(runs):
+            run = collect_run(env, config, seed, "train", index)
+            lengths.append(run.n_frames)
+            bumped.append(run.meta.collision)
+    finally:
+        env.close()
+    lengths = np.array(lengths)
+    kept = lengths[lengths >= MIN_FRAMES]
+    per_run = float(kept.mean() - 1) if len(kept) else 0.0  # samples: frames with an action
+    return {
+        "decision_hz": decision_hz,
+        "max_yaw_rate": env_config.world.max_yaw_rate,
+        "runs": runs,
+        "kept_share": len(kept) / runs,
+        "frames_per_kept_run": float(kept.mean()) if len(kept) else 0.0,
+        "frames_per_kept_run_std": float(kept.std()) if len(kept) else 0.0,
+        "bumped_share": float(np.mean(bumped)),
+        "samples": {n: round(n * per_run) for n in PAPER_TABLE2},
+        "samples_without_collision": {n: round(n * (per_run - HORIZON)) for n in PAPER_TABLE2},
+    }
+
+
+def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: float = 45.0) -> dict:
+    """The one-step oracle (true next bins for −1, 0, +1; max-min rule) in `canyons`."""
+    from depthq.control.action_selection import select_depth_action
+    from depthq.evaluate.evaluate import parse_canyon_set
+    from depthq.evaluate.metrics import SUCCESS_DISTANCE
+    from depthq.sim.env import CanyonEnv, EnvConfig
+    from depthq.sim.sensors import depth_bins, finish_scan
+    from depthq.sim.world import WorldConfig
+
+    env = CanyonEnv(
+        EnvConfig(world=WorldConfig(decision_hz=decision_hz), time_limit_s=time_limit_s), camera=False
+    )
+    world, distances = env.world, []
+    exact, rng = replace(env.config.world.lidar, noise_std=0.0), np.random.default_rng(0)
+    try:
+        for k, canyon in enumerate(parse_canyon_set(canyons)):
+            _, info = env.reset(seed=k, options={"canyon": canyon})
+            done = False
+            while not done:
+                pose = world.pose
+                preds = []
+                for a in ACTIONS:
+                    world.place(*pose)
+                    world.advance(float(a))
+                    preds.append(depth_bins(finish_scan(world.raycast(), exact, rng), env.config.bins))
+                world.place(*pose)
+                _, _, terminated, truncated, info = env.step([select_depth_action(np.array(preds), ACTIONS)])
+                done = terminated or truncated
+            distances.append(info["distance"])
+    finally:
+        env.close()
+    d = np.array(distances)
+    return {
+        "decision_hz": decision_hz,
+        "canyons": canyons,
+        "distance_mean": float(d.mean()),
+        "successes": int((d > SUCCESS_DISTANCE).sum()),
+        "distances": [round(float(x), 2) for x in d],
+    }
+
+
+def small_nets(
+    decision_hz: float,
+    out: Path,
+    runs: int,
+    canyons: str = VAL_CANYONS,
+    nets: tuple[str, ...] = ("depth",),
+    **train_overrides: Any,
+) -> dict:
+    """Collect `runs` OU runs at `decision_hz`, train each of `nets` on them, drive each in `canyons`."""
+    from depthq.data.collect import CollectConfig, collect, exploration_env
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.train.config import TrainConfig
+    from depthq.train.trainer import train
+
+    data = out / "data"
+    collect(
+        data,
+        CollectConfig(runs=runs, val_runs=max(10, runs // 10), env=exploration_env(decision_hz)),
+        seed=0,
+        workers=2,
+    )
+    eval_config = EvalConfig(canyons=parse_canyon_set(canyons), decision_hz=decision_hz)
+    tag = "".join(f"_{k}{v}" for k, v in sorted(train_overrides.items()))
+    result = {}
+    for net in nets:
+        ckpt = out / f"{net}_n{runs}{tag}"
+        train(TrainConfig(model=net, data=str(data), runs=runs, **train_overrides), ckpt)
+        summary = evaluate(str(ckpt), out / "eval" / ckpt.name, eval_config)
+        result[ckpt.name] = {**summary["summary"], "offline": summary.get("offline")}
+    return result
+
+
+def _parallel(fn, args_list: list[tuple]) -> list:
+    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(fn, *args) for args in args_list]
+        return [f.result() for f in tqdm(futures, desc=fn.__name__, unit="task")]
+
+
+def probe(
+    rates: tuple[float, ...],
+    parts: tuple[str, ...],
+    out: Path,
+    stats_runs: int = 300,
+    dqn_runs: int = 200,
+    canyons: str = VAL_CANYONS,
+) -> dict[str, Any]:
+    """Run the chosen parts at each rate; returns (and the CLI writes) everything measured."""
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        raise ConfigError(f"unknown probe part(s) {unknown}; expected some of {PARTS}")
+    result: dict[str, Any] = {"rates": list(rates)}
+    if "stats" in parts:
+        result["stats"] = _parallel(ou_statistics, [(hz, stats_runs) for hz in rates])
+    if "oracle" in parts:
+        result["oracle"] = _parallel(oracle_drive, [(hz, canyons) for hz in rates])
+    if "dqn" in parts:
+        result["dqn"] = {str(hz): small_nets(hz, out / f"hz{hz:g}", dqn_runs, canyons) for hz in rates}
+    return result
+
+
+def format_stats(rows: list[dict]) -> str:
+    """The calibration table: each candidate rate's Table II statistics next to the paper's."""
+    sizes = list(PAPER_TABLE2)
+    head = f"{'Hz':>5} {'kept':>6} {'frames/run':>11} {'bumped':>7} " + " ".join(f"{n:>7}" for n in sizes)
+    lines = [head]
+    for r in rows:
+        samples = " ".join(f"{r['samples'][n]:>7}" for n in sizes)
+        lines.append(
+            f"{r['decision_hz']:>5g} {r['kept_share']:>6.1%} {r['frames_per_kept_run']:>11.1f} "
+            f"{r['bumped_share']:>7.1%} {samples}"
+        )
+    paper = " ".join(f"{PAPER_TABLE2[n][0]:>7}" for n in sizes)
+    lines.append(f"{'paper':>5} {'':>6} {PAPER_FRAMES_PER_RUN:>11.1f} {'':>7} {paper}")
+    return "\n".join(lines)

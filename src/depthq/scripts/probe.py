@@ -1,0 +1,45 @@
+"""Fidelity probe: OU run statistics (Table II calibration), the one-step oracle, a small Depth-Q-Net."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from depthq.errors import ConfigError
+
+
+def _rates(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--hz must be comma-separated rates, e.g. 10,5,4; got {text!r}") from None
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--hz", default="4", help="candidate decision rates, comma-separated, e.g. 10,5,4")
+    p.add_argument("--parts", default="stats,oracle,dqn", help="some of stats, oracle, dqn")
+    p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
+    p.add_argument("--runs", type=int, default=200, help="training runs of the small Depth-Q-Net")
+    p.add_argument("--canyons", default="val:1000-1019", help="val canyons to drive in (never eval)")
+    p.add_argument("--out", type=Path, required=True, help="folder for probe.json and the small runs")
+
+
+def run(args: argparse.Namespace) -> int:
+    from depthq.report.probe import format_stats, probe
+
+    if args.canyons.startswith("eval"):
+        raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")
+    parts = tuple(args.parts.split(","))
+    result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "probe.json").write_text(json.dumps(result, indent=1))
+    if "stats" in result:
+        print(format_stats(result["stats"]))
+    for row in result.get("oracle", []):
+        print(f"oracle at {row['decision_hz']:g} Hz in {row['canyons']}: {row['successes']}/20, "
+              f"{row['distance_mean']:.2f} m")
+    for hz, nets in result.get("dqn", {}).items():
+        for name, s in nets.items():
+            print(f"{name} at {hz} Hz: {s['successes']}/{s['runs']}, {s['distance_mean']:.2f} m")
+    return 0
