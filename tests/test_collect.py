@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from depthq.cli import main
 from depthq.data.collect import CollectConfig, collect
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
+from depthq.sim.world import TURTLEBOT3_MAX_YAW_RATE
 
 ARGS = ["--runs", "4", "--val-runs", "1", "--max-steps", "40", "--seed", "3"]
 CONFIG = CollectConfig(runs=4, val_runs=1, max_steps=40)
@@ -37,13 +39,36 @@ def arrays(dataset: Dataset) -> dict[str, dict[str, np.ndarray]]:
 
 def test_runs_are_real_exploration_runs(reference):
     entries = reference.entries()
-    assert [(e.split, e.index) for e in entries] == [("train", i) for i in range(4)] + [("val", 0)]
-    run = reference.read_run(entries[0])
+    for split, wanted in (("train", 4), ("val", 1)):  # short runs (< 20 frames) are kept but do not count
+        indices = [e.index for e in entries if e.split == split]
+        assert indices == list(range(len(indices)))
+        assert sum(e.n_frames >= 20 for e in entries if e.split == split) == wanted
+    run = reference.read_run(next(e for e in entries if e.n_frames >= 20))
     assert run.images.shape[1:] == (308, 410, 3)
-    assert np.isnan(run.actions[-1]) and np.all(np.abs(run.actions[:-1]) <= 1)
-    assert run.actions[0] == 0.0  # OU restarts at 0 every run
-    assert run.meta.end_reason in ("bump", "contact", "step_limit")
+    # The command is stored unclipped, up to the robot's limit; labels clip it later.
+    assert np.isnan(run.actions[-1]) and np.all(np.abs(run.actions[:-1]) <= TURTLEBOT3_MAX_YAW_RATE)
+    assert run.meta.end_reason in ("bump", "contact", "time_limit", "step_limit")
     assert np.all(np.diff(run.times) > 0)
+    # The first 9 frames were driven but not saved: the stored run starts 9 decision periods in.
+    period = CONFIG.env.world.period
+    assert run.times[0] == pytest.approx(9 * period) and np.allclose(np.diff(run.times), period)
+
+
+def test_runs_replay_the_original_recorder_without_a_camera():
+    """Frames 0..8 are dropped from the very same drive: a run without skipping holds them first."""
+    from depthq.data.collect import collect_run
+    from depthq.sim.env import CanyonEnv
+
+    env = CanyonEnv(CONFIG.env, camera=False)
+    try:
+        kept = collect_run(env, CONFIG, 3, "train", 1)
+        full = collect_run(env, replace(CONFIG, skip_frames=0), 3, "train", 1)
+    finally:
+        env.close()
+    assert full.n_frames == kept.n_frames + 9
+    np.testing.assert_array_equal(full.poses[9:], kept.poses)
+    np.testing.assert_array_equal(full.actions[9:], kept.actions)
+    assert full.meta.end_reason == kept.meta.end_reason
 
 
 def test_interrupted_collection_resumes_to_identical_arrays(reference, tmp_path):
@@ -59,7 +84,7 @@ def test_interrupted_collection_resumes_to_identical_arrays(reference, tmp_path)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     recorded = len(json.loads(manifest.read_text())["runs"])
-    assert 1 <= recorded < 5, "the kill should land mid-collection"
+    assert 1 <= recorded < len(reference.entries()), "the kill should land mid-collection"
     assert main(["collect", *ARGS, "--workers", "2", "--out", str(out)]) == 0
     resumed = Dataset.open(out)
     assert [e.sha256 for e in resumed.entries()] == [e.sha256 for e in reference.entries()]
@@ -86,3 +111,17 @@ def test_resume_is_a_no_op_when_complete(reference):
     before = {p: p.stat().st_mtime_ns for p in Path(reference.root).rglob("*.h5")}
     collect(reference.root, CONFIG, seed=3, workers=1, progress=False)
     assert {p: p.stat().st_mtime_ns for p in Path(reference.root).rglob("*.h5")} == before
+
+
+def test_probe_statistics_and_oracle_on_train_and_val_canyons(tmp_path, capsys):
+    """Table II statistics of OU runs without a camera, and the one-step oracle in a val canyon."""
+    from depthq.report.probe import PAPER_FRAMES_PER_RUN, format_stats, oracle_drive, ou_statistics
+
+    stats = ou_statistics(4.0, runs=6)
+    assert stats["runs"] == 6 and 0 < stats["kept_share"] <= 1 and stats["frames_per_kept_run"] >= 20
+    assert stats["samples"][900] == round(900 * (stats["frames_per_kept_run"] - 1))
+    assert f"{PAPER_FRAMES_PER_RUN:.1f}" in format_stats([stats])
+    oracle = oracle_drive(4.0, "val:1000", time_limit_s=10.0)
+    assert oracle["distances"][0] > 4.0  # 10 s at 0.5 m/s: the oracle drives without bumping
+    assert main(["probe", "--canyons", "eval:0-3", "--out", str(tmp_path / "p")]) == 2
+    assert "test set" in capsys.readouterr().err and not (tmp_path / "p").exists()

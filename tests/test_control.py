@@ -42,17 +42,17 @@ def test_heuristic_ignores_invalid_readings():
     assert DepthHeuristic().act(obs_with(scan)) == 0.0
 
 
-def test_ou_restarts_at_zero_and_follows_the_recursion():
+def test_ou_restarts_at_zero_and_follows_the_recursion_unclipped():
     config = OUConfig()
     policy = OUPolicy(config, seed=7)
-    actions = [policy.act(None) for _ in range(50)]
-    assert actions[0] == 0.0
+    actions = [policy.act(None) for _ in range(200)]
     rng = np.random.default_rng(7)
     x, expected = 0.0, []
-    for _ in range(50):
-        expected.append(float(np.clip(0.3 * x, -1, 1)))
+    for _ in range(200):
         x += 0.05 * (0 - x) + 1.0 * rng.standard_normal()
+        expected.append(0.3 * x)  # the first command is already 0.3·N(0, 1); never clipped
     np.testing.assert_allclose(actions, expected)
+    assert actions[0] != 0.0 and max(abs(a) for a in actions) > 1.0
     policy.reset(7)
-    assert [policy.act(None) for _ in range(50)] == actions
+    assert [policy.act(None) for _ in range(200)] == actions
     assert isinstance(policy, Policy)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -263,7 +264,7 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [20, 24, 21])  # runs 0, 1 bump, run 2 time limit
     runs = {e.index: dataset.read_run(e) for e in dataset.entries("train")}
     depth = DepthView(dataset, "train", 3, CONFIG)
-    assert len(depth) == 14 + 18 + 20
+    assert len(depth) == 14 + 18 + 15  # the original drops the last 5 samples of every run
     for i in range(len(depth)):
         run_id, t = int(depth.arrays["run_id"][i]), int(depth.arrays["frame_id"][i])
         image, action, target = depth[i]
@@ -275,9 +276,33 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
     labels = coll.arrays["target"]
     offsets = coll.arrays["run_offsets"]
     assert labels[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
-    assert labels[offsets[2] : offsets[3]].sum() == 0
+    assert labels[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
     val = DepthView(dataset, "val", None, CONFIG)
     assert set(val.arrays["run_id"].tolist()) == {0} and len(val) == 16
+    # Collision labels on bumps only: the time-limited run keeps all its samples, labelled 0.
+    bumps_only = replace(CONFIG, every_run_end=False)
+    assert len(DepthView(dataset, "train", 3, bumps_only)) == 14 + 18 + 20
+    coll = view_arrays(dataset, "train", 3, "coll", bumps_only)
+    assert coll["target"][coll["run_offsets"][2] :].sum() == 0
+
+
+def test_action_labels_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
+    """The stored command (up to ±2.84 rad/s) is clipped to ±1 as a label; with action_lag = 1,
+    frame t is labelled with the command computed from frame t − 1 and frame 0 is no sample."""
+    dataset = Dataset.create(tmp_path / "d", {"collect": {}}, seed=0)
+    run = make_run("train", 0, 22)
+    fast = Run(**{**{f: getattr(run, f) for f in ("meta", "images", "scans", "bins", "poses", "times")},
+                  "actions": (run.actions * 2.5).astype(np.float32)})
+    dataset.add_run(fast, jpeg_quality=90)
+    depth = view_arrays(dataset, "train", None, "depth", CONFIG)
+    np.testing.assert_array_equal(depth["action"], np.clip(fast.actions[:16], -1, 1))
+    assert np.abs(fast.actions[:-1]).max() > 1
+    lagged = view_arrays(dataset, "train", None, "depth", replace(CONFIG, action_lag=1))
+    np.testing.assert_array_equal(lagged["frame_id"], np.arange(1, 16))
+    np.testing.assert_array_equal(lagged["action"], np.clip(fast.actions[:15], -1, 1))
+    np.testing.assert_array_equal(lagged["target"], fast.bins[2:17])
+    coll = view_arrays(dataset, "train", None, "coll", replace(CONFIG, action_lag=1))
+    assert coll["frame_id"][0] == 1 and coll["target"].tolist() == [0] * 15 + [1] * 5
 
 
 def test_views_sample_deterministically(tmp_path: Path) -> None:
@@ -313,7 +338,7 @@ def test_stats_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
         "subset": "2",
         "runs": 2,
         "samples": 19 + 29,
-        "samples_without_collision": 14 + 29,
+        "samples_without_collision": 14 + 24,
         "mean_run_length": 25.0,
         "collision_fraction": 0.5,
     }

@@ -10,6 +10,7 @@ from depthq.control.action_selection import depth_scores, select_coll_action, se
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.metrics import distance_from_spawn, imitation_loss, path_length
+from depthq.sim.world import DEFAULT_DECISION_HZ
 
 ACTIONS = np.array([-1.0, 0.0, 1.0])
 
@@ -49,7 +50,8 @@ def test_canyon_sets_parse_and_bad_ones_are_refused():
     assert parse_canyon_set("eval")[-1] == "eval:19"
     assert parse_canyon_set("eval:2-4") == ("eval:2", "eval:3", "eval:4")
     assert parse_canyon_set("eval:7,1") == ("eval:7", "eval:1")
-    for bad in ("train", "eval:a", "eval:25"):
+    assert parse_canyon_set("val:1000-1001") == ("val:1000", "val:1001")  # design choices are made there
+    for bad in ("train", "eval:a", "eval:25", "val", "train:0-3"):
         with pytest.raises(ConfigError):
             parse_canyon_set(bad)
 
@@ -65,8 +67,9 @@ def test_heuristic_evaluation_gives_sane_metrics_and_files(heuristic_eval):
     out, result = heuristic_eval
     runs = result["runs"]
     assert [r["canyon"] for r in runs] == ["eval:0", "eval:1"]
+    steps = round(6.0 * DEFAULT_DECISION_HZ)  # one decision per camera frame
     for r in runs:  # 6 s at 0.5 m/s: about 3 m, no collision, the expert imitates itself
-        assert r["end_reason"] == "time_limit" and r["steps"] == 60
+        assert r["end_reason"] == "time_limit" and r["steps"] == steps
         assert 2.7 < r["distance"] <= r["path_length"] <= 3.01
         assert r["imitation_loss"] == 0.0 and not r["success"]
     assert result["summary"]["successes"] == 0
@@ -74,7 +77,7 @@ def test_heuristic_evaluation_gives_sane_metrics_and_files(heuristic_eval):
     assert saved["summary"] == result["summary"]
     assert (out / "runs.csv").read_text().count("\n") == 3
     with np.load(out / "trajectories.npz", allow_pickle=False) as z:
-        assert z["eval_0_poses"].shape == (61, 3)
+        assert z["eval_0_poses"].shape == (steps + 1, 3)
     assert (out / "trajectories.png").stat().st_size > 1000
 
 

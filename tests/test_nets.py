@@ -117,7 +117,7 @@ def test_depth_loss_masks_nan_and_clipped_bins_by_hand():
             [nan, 2.0, 3.0, nan],  # nothing valid → 0
         ]
     )
-    loss, per_sample = depth_l1_loss(pred, target)
+    loss, per_sample = depth_l1_loss(pred, target, reduction="valid_mean")
     torch.testing.assert_close(per_sample, torch.tensor([0.5, 0.375, 0.0]), atol=0, rtol=1e-6)
     torch.testing.assert_close(loss, torch.tensor((0.5 + 0.5 + 0.5 + 0.25) / 4))
     loss.backward()
@@ -125,9 +125,27 @@ def test_depth_loss_masks_nan_and_clipped_bins_by_hand():
     assert torch.all(pred.grad[2] == 0) and pred.grad[0, 1] == 0 and pred.grad[1, 1] == 0
 
 
-def test_depth_loss_all_invalid_batch_is_zero():
+def test_the_original_depth_loss_by_hand():
+    """Weights 1 where 0.001 < target < 2, min-pooled 2 wide (the left neighbour of an excluded bin
+    goes too), the weighted L1 averaged over all bins, then over the batch."""
+    pred = torch.tensor([[1.0] * 5, [0.5] * 5], requires_grad=True)
+    target = torch.tensor(
+        [
+            [0.5, 1.5, 2.0, 0.0005, 1.0],  # weights 1 1 0 0 1 → pooled 1 0 0 0 1: (0.5 + 0) / 5
+            [1.0, 0.25, 1.5, 1.0, 2.0],  # weights 1 1 1 1 0 → pooled 1 1 1 0 0: (0.5 + 0.25 + 1) / 5
+        ]
+    )
+    loss, per_sample = depth_l1_loss(pred, target)
+    torch.testing.assert_close(per_sample, torch.tensor([0.5 / 5, 1.75 / 5]))
+    torch.testing.assert_close(loss, per_sample.mean())
+    loss.backward()
+    assert pred.grad[0, 1] == 0 and pred.grad[1, 3] == 0 and pred.grad[0, 0] != 0
+
+
+@pytest.mark.parametrize("reduction", ["original", "valid_mean"])
+def test_depth_loss_all_invalid_batch_is_zero(reduction):
     pred = torch.ones(2, 26, requires_grad=True)
-    loss, per_sample = depth_l1_loss(pred, torch.full((2, 26), math.nan))
+    loss, per_sample = depth_l1_loss(pred, torch.full((2, 26), math.nan), reduction=reduction)
     assert loss.item() == 0 and torch.all(per_sample == 0)
     loss.backward()
     assert torch.all(pred.grad == 0)

@@ -27,10 +27,23 @@ def test_invalid_readings_are_ignored_and_an_all_invalid_bin_is_nan():
     scan[[49]] = np.nan
     scan[48] = 0.6
     scan[[47, 46, 45, 44]] = 0.0
-    bins = depth_bins(scan)
+    bins = depth_bins(scan, BinConfig(invalid_as_far=False))
     assert bins[0] == pytest.approx(0.6)
     assert np.isnan(bins[1])
     assert bins[2] == pytest.approx(1.0)
+
+
+def test_the_original_counts_invalid_readings_as_far():
+    """The recorder stored 0 or no return as 5 m: after the 2 m clip such a reading is far, never NaN."""
+    scan = scan_of(1.0)
+    scan[[51, 50]] = 0.0
+    scan[49] = np.nan
+    scan[48] = 0.6
+    scan[[47, 46, 45, 44]] = 0.0
+    bins = depth_bins(scan)
+    assert bins[0] == pytest.approx((2.0 + 2.0 + 2.0 + 0.6) / 4)
+    assert bins[1] == 2.0
+    assert not np.isnan(bins).any()
 
 
 def test_bins_ignore_readings_outside_the_104_degree_window():

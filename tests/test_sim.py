@@ -16,12 +16,15 @@ from depthq.sim.mjcf import CameraConfig
 from depthq.sim.sensors import LidarConfig
 from depthq.sim.world import CanyonWorld, WorldConfig
 
-NOISELESS = WorldConfig(lidar=LidarConfig(noise_std=0.0), camera=CameraConfig(noise_std=0.0))
+TEN_HZ = WorldConfig(decision_hz=10.0)  # the step counts below are written for 0.1 s decisions
+NOISELESS = WorldConfig(
+    lidar=LidarConfig(noise_std=0.0), camera=CameraConfig(noise_std=0.0), decision_hz=10.0
+)
 
 
 @pytest.fixture(scope="module")
 def env():
-    e = CanyonEnv()
+    e = CanyonEnv(EnvConfig(world=TEN_HZ))
     yield e
     e.close()
 
@@ -115,8 +118,25 @@ def test_driving_into_a_wall_ends_the_run(env):
     assert step < 100
 
 
+def test_one_step_is_one_camera_frame_at_the_decision_rate():
+    """At 4 Hz a step lasts 0.25 s (12.5 cm); the action space is the robot's yaw-rate limit."""
+    e = CanyonEnv(EnvConfig(world=WorldConfig(decision_hz=4.0, max_yaw_rate=2.84)), camera=False)
+    e.reset(seed=0, options={"canyon": "eval:0"})
+    assert e.action_space.high[0] == pytest.approx(2.84) and e.metadata["render_fps"] == 4.0
+    _, _, _, _, info = e.step(np.zeros(1, np.float32))
+    assert info["time"] == pytest.approx(0.25) and info["path_length"] == pytest.approx(0.125, rel=0.01)
+    yaw = info["pose"][2]
+    _, _, _, _, info = e.step(np.array([2.0], np.float32))  # not clipped to 1: turns 0.5 rad
+    assert info["pose"][2] - yaw == pytest.approx(0.5, rel=1e-3)
+    _, _, _, _, info = e.step(np.array([9.0], np.float32))  # clipped to 2.84 rad/s
+    assert info["pose"][2] - yaw == pytest.approx(0.5 + 0.71, rel=1e-3)
+    e.close()
+    with pytest.raises(ConfigError, match="decision_hz"):
+        WorldConfig(decision_hz=3.0)  # 1/3 s is no whole number of 5 ms physics steps
+
+
 def test_time_limit_truncates():
-    e = CanyonEnv(EnvConfig(time_limit_s=0.5))
+    e = CanyonEnv(EnvConfig(world=TEN_HZ, time_limit_s=0.5))
     e.reset(seed=0, options={"canyon": "eval:0"})
     results = [e.step(np.zeros(1, np.float32)) for _ in range(5)]
     e.close()

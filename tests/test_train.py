@@ -12,7 +12,7 @@ import torch
 from safetensors.torch import load_file
 
 from depthq.configio import read_json
-from depthq.data.collect import CollectConfig, collect
+from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.nets.optim import make_optimizer
@@ -154,10 +154,13 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="epochs"):
         TrainConfig(model="depth", data=str(data), epochs=0)
 
-    no_bumps = tmp_path / "no_bumps"  # seed 0, 25 steps: no run lasts long enough to bump
-    collect(no_bumps, CollectConfig(runs=2, val_runs=1, max_steps=25), seed=0, workers=1, progress=False)
+    with pytest.raises(ConfigError, match="max_steps 25"):  # runs could never be long enough to count
+        CollectConfig(max_steps=25)
+    no_bumps = tmp_path / "no_bumps"  # seed 0, 2.9 s at 10 Hz: no run lasts long enough to bump
+    config = CollectConfig(runs=2, val_runs=1, max_steps=29, env=exploration_env(10.0))
+    collect(no_bumps, config, seed=0, workers=1, progress=False)
     with pytest.raises(ConfigError, match="no run ended in a bump"):
-        train(_config(no_bumps, model="coll"), tmp_path / "coll", progress=False)
+        train(_config(no_bumps, model="coll", every_run_end=False), tmp_path / "coll", progress=False)
     assert not (tmp_path / "coll").exists()
 
     (tmp_path / "empty").mkdir()

@@ -12,6 +12,7 @@ whatever the number of workers and however often the collection was interrupted 
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 import time
 from collections.abc import Iterator
@@ -69,6 +70,13 @@ class CollectConfig:
             raise ConfigError(f"max_steps must be >= 1, got {self.max_steps}")
         if self.skip_frames < 0:
             raise ConfigError(f"skip_frames must be >= 0, got {self.skip_frames}")
+        steps = min(self.max_steps, math.floor(self.env.time_limit_s / self.env.world.period + 1e-9))
+        if steps + 1 - self.skip_frames < self.data.min_frames:
+            raise ConfigError(
+                f"runs of at most {steps} steps (max_steps {self.max_steps}, {self.env.time_limit_s} s "
+                f"at {self.env.world.decision_hz:g} Hz) keep at most {steps + 1 - self.skip_frames} frames "
+                f"after skipping {self.skip_frames}: none would reach min_frames = {self.data.min_frames}"
+            )
 
 
 def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:

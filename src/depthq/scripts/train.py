@@ -21,6 +21,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lr", type=float, default=None, help="learning rate (default: 0.1 depth, 0.01 coll)")
     p.add_argument("--dropout", type=float, default=0.0,
                    help="dropout on the feature (paper: 0.5; see TrainConfig)")
+    p.add_argument("--depth-loss", default="original",
+                   help="original (the authors' L1, averaged over all bins) or valid_mean")
+    p.add_argument("--action-lag", type=int, default=0,
+                   help="1: label frame t with the command of frame t-1 (the original recorder, likely)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -30,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     from depthq.train.trainer import train
 
     config = TrainConfig(model=args.model, data=str(args.data), runs=args.runs, seed=args.seed,
-                         epochs=args.epochs, trunk=args.trunk, lr=args.lr, dropout=args.dropout)
+                         epochs=args.epochs, trunk=args.trunk, lr=args.lr, dropout=args.dropout,
+                         depth_loss=args.depth_loss, action_lag=args.action_lag)
     out = train(config, args.out, progress=not args.no_progress)
     best, last = read_json(out / "best.json"), read_json(out / "last.json")
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "

@@ -1,0 +1,70 @@
+"""The design choices of issue #10, measured on validation data and `val` canyons only.
+
+    python docs/val_choices.py runs/paper/data runs/val-choices [variant ...]
+
+Trains each variant (a Depth-Q-Net or Coll-Q-Net on the first n runs of the dataset, seed 0, with
+some TrainConfig fields changed) and drives it in the 20 canyons val:1000-1019, which no dataset
+and no evaluation table uses. Prints (and writes to OUT/val_choices.md) one row per variant:
+validation loss, successes, mean distance, how runs ended. Finished variants are reused.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+
+import depthq  # noqa: F401  (MUJOCO_GL before mujoco)
+from depthq.configio import read_json
+from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+
+CANYONS = "val:1000-1019"
+VARIANTS: dict[str, dict] = {
+    "depth_n200": {"model": "depth", "runs": 200},
+    "depth_n200_lag1": {"model": "depth", "runs": 200, "action_lag": 1},
+    "depth_n500": {"model": "depth", "runs": 500},
+    "coll_n200": {"model": "coll", "runs": 200},
+    "coll_n500": {"model": "coll", "runs": 500},
+    "coll_n500_lr0.1": {"model": "coll", "runs": 500, "lr": 0.1},
+    "coll_n500_epochs120": {"model": "coll", "runs": 500, "epochs": 120},
+}
+
+
+def run_variant(data: Path, out: Path, name: str) -> dict:
+    ckpt, ev = out / name, out / "eval" / name
+    train(TrainConfig(data=str(data), **VARIANTS[name]), ckpt)
+    summary_path = ev / "summary.json"
+    if summary_path.is_file():
+        result = read_json(summary_path)
+    else:
+        result = evaluate(str(ckpt), ev, EvalConfig(canyons=parse_canyon_set(CANYONS)))
+    s = result["summary"]
+    return {
+        "variant": name,
+        "val_loss": read_json(ckpt / "best.json")["val_loss"],
+        "successes": s["successes"],
+        "distance": round(s["distance_mean"], 2),
+        "imitation": round(s["imitation_loss_mean"], 3),
+        "ends": dict(Counter(r["end_reason"] for r in result["runs"])),
+    }
+
+
+if __name__ == "__main__":
+    data, out = Path(sys.argv[1]), Path(sys.argv[2])
+    names = sys.argv[3:] or list(VARIANTS)
+    rows = [run_variant(data, out, name) for name in names]
+    lines = [
+        "| variant | best val loss | successes / 20 | distance (m) | imitation | ends |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += [
+        f"| {r['variant']} | {r['val_loss']:.4f} | {r['successes']} | {r['distance']} | {r['imitation']} | "
+        f"{json.dumps(r['ends'])} |"
+        for r in rows
+    ]
+    table = "\n".join(lines)
+    print(table)
+    (out / "val_choices.md").write_text(table + "\n")
