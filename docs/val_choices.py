@@ -22,14 +22,14 @@ from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 
 CANYONS = "val:1000-1019"
+# Each choice against its alternative; "action_scale" 1 is the head as it was before #10.
 VARIANTS: dict[str, dict] = {
-    "depth_n200": {"model": "depth", "runs": 200},
-    "depth_n200_lag1": {"model": "depth", "runs": 200, "action_lag": 1},
-    "depth_n500": {"model": "depth", "runs": 500},
-    "coll_n200": {"model": "coll", "runs": 200},
-    "coll_n500": {"model": "coll", "runs": 500},
-    "coll_n500_lr0.1": {"model": "coll", "runs": 500, "lr": 0.1},
-    "coll_n500_epochs120": {"model": "coll", "runs": 500, "epochs": 120},
+    "depth_n200": {"model": "depth", "runs": 200, "action_scale": 1.0},
+    "depth_n200_lag1": {"model": "depth", "runs": 200, "action_scale": 1.0, "action_lag": 1},
+    "depth_n200_action10": {"model": "depth", "runs": 200, "action_scale": 10.0},
+    "coll_n500_lr0.01": {"model": "coll", "runs": 500, "action_scale": 1.0, "lr": 0.01},  # the paper's rate
+    "coll_n500_lr0.1": {"model": "coll", "runs": 500, "action_scale": 1.0, "lr": 0.1},
+    "coll_n500_lr0.1_action10": {"model": "coll", "runs": 500, "action_scale": 10.0, "lr": 0.1},
 }
 
 

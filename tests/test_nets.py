@@ -169,9 +169,14 @@ def test_heads_shapes_init_and_config():
     assert depth(features, actions).shape == (5, 26) and (depth(features, actions) >= 0).all()
     assert coll(features, actions.reshape(-1, 1)).shape == (5,)
     assert all(torch.all(m.bias == 0) for m in coll.modules() if isinstance(m, nn.Linear))
-    for bad, match in (({"kind": "value"}, "kind"), ({"hidden": 0}, "hidden"), ({"dropout": 1.0}, "dropout")):
+    for bad, match in (({"kind": "value"}, "kind"), ({"hidden": 0}, "hidden"), ({"dropout": 1.0}, "dropout"),
+                       ({"action_scale": 0.0}, "action_scale")):
         with pytest.raises(ConfigError, match=match):
             HeadConfig(**{"kind": "depth", "feature_dim": 256, **bad})
+    # action_scale s feeds s·a to the hidden layer: the same weights see action a as the plain head sees s·a
+    scaled = build_head(HeadConfig("depth", 256, action_scale=10.0))
+    scaled.load_state_dict(depth.state_dict())
+    torch.testing.assert_close(scaled(features, actions), depth(features, 10.0 * actions))
 
 
 @pytest.mark.parametrize("kind", ["depth", "coll"])

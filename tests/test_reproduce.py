@@ -28,10 +28,12 @@ def test_tables_hold_numbers_for_both_networks(smoke):
         for column in ("distance CQN", "distance DQN", "success CQN", "success DQN", "imitation CQN",
                        "imitation DQN", "cross-entropy CQN", "abs diff DQN"):
             assert number.match(row[column]), (column, row[column])
+        assert re.match(r"^\d+% \(\d+%\)$", row["circling CQN"]), row["circling CQN"]
     table1 = (smoke / "table1.md").read_text()
     assert "| heuristic |" in table1 and "| ou |" in table1
     table2 = (smoke / "table2.md").read_text()
     assert re.search(r"^\| 6 \| \d+ \| \d+ \|", table2, re.M)
+    assert "| val |" in table2 and "paper: samples" in table2  # the paper's sizes are not in the smoke set
 
 
 def test_report_is_self_contained_and_references_only_existing_files(smoke):

@@ -36,6 +36,7 @@ class HeadConfig:
     hidden: int = 4096
     n_bins: int = 26
     dropout: float = 0.5
+    action_scale: float = 1.0  # the action enters the hidden layer as action_scale · a
 
     def __post_init__(self) -> None:
         if self.kind not in HEAD_KINDS:
@@ -47,6 +48,8 @@ class HeadConfig:
         dropout = self.dropout
         if isinstance(dropout, bool) or not isinstance(dropout, int | float) or not 0 <= dropout < 1:
             raise ConfigError(f"HeadConfig.dropout must be in [0, 1), got {self.dropout!r}")
+        if not self.action_scale > 0:
+            raise ConfigError(f"HeadConfig.action_scale must be > 0, got {self.action_scale!r}")
 
 
 class Head(nn.Module):
@@ -69,7 +72,7 @@ class Head(nn.Module):
             raise ConfigError(
                 f"head: expected features (B, {self.config.feature_dim}), got {tuple(feature.shape)}"
             )
-        action = action.reshape(-1, 1).to(feature.dtype)
+        action = action.reshape(-1, 1).to(feature.dtype) * self.config.action_scale
         if action.shape[0] != feature.shape[0]:
             raise ConfigError(f"head: {feature.shape[0]} features but {action.shape[0]} actions")
         return F.relu(self.hidden(torch.cat([self.dropout(feature), action], dim=1)))

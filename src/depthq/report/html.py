@@ -44,6 +44,17 @@ DEVIATIONS = [
         "the paper's run length; no rate gets below ≈ 53 frames in our world",
     ),
     (
+        "The raw action appended to the 256-d MobileNet feature",
+        "the action ×10 appended to the 1280-d EfficientNet feature (TrainConfig.action_scale)",
+        "with ×1 the head hardly used the action (docs/action_fidelity.py on validation frames); "
+        "chosen on validation data and val canyons",
+    ),
+    (
+        "Coll-Q-Net learning rate 0.01",
+        "0.1",
+        "0.01 under-trains it within 40 epochs: validation BCE 0.145 vs 0.112 (500 runs)",
+    ),
+    (
         "OU command unlimited in Gazebo",
         "OU command clipped at the TurtleBot3 Burger's 2.84 rad/s",
         "the real robot's limit; touches ≈ 0.3 % of the commands",

@@ -8,8 +8,8 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
 - `oracle`: the selection rule of SPEC §1.7 fed with the simulator's true next bins for each
   candidate action (a perfect Depth-Q-Net), driven in `val` canyons: what the rule can reach at
   a rate, whatever the network.
-- `dqn`: a small dataset collected at a rate, one Depth-Q-Net (and one Coll-Q-Net) trained on it
-  and driven in `val` canyons: the end-to-end check, in a few minutes.
+- `dqn`: a small dataset collected at a rate, one Depth-Q-Net trained on it and driven in `val`
+  canyons (at the data's rate): the end-to-end check, in a few minutes.
 """
 
 from __future__ import annotations
@@ -108,36 +108,19 @@ def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: f
     }
 
 
-def small_nets(
-    decision_hz: float,
-    out: Path,
-    runs: int,
-    canyons: str = VAL_CANYONS,
-    nets: tuple[str, ...] = ("depth",),
-    **train_overrides: Any,
-) -> dict:
-    """Collect `runs` OU runs at `decision_hz`, train each of `nets` on them, drive each in `canyons`."""
+def small_dqn(decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYONS) -> dict:
+    """Collect `runs` OU runs at `decision_hz`, train a Depth-Q-Net on them, drive it in `canyons`."""
     from depthq.data.collect import CollectConfig, collect, exploration_env
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
     from depthq.train.config import TrainConfig
     from depthq.train.trainer import train
 
     data = out / "data"
-    collect(
-        data,
-        CollectConfig(runs=runs, val_runs=max(10, runs // 10), env=exploration_env(decision_hz)),
-        seed=0,
-        workers=2,
-    )
-    eval_config = EvalConfig(canyons=parse_canyon_set(canyons), decision_hz=decision_hz)
-    tag = "".join(f"_{k}{v}" for k, v in sorted(train_overrides.items()))
-    result = {}
-    for net in nets:
-        ckpt = out / f"{net}_n{runs}{tag}"
-        train(TrainConfig(model=net, data=str(data), runs=runs, **train_overrides), ckpt)
-        summary = evaluate(str(ckpt), out / "eval" / ckpt.name, eval_config)
-        result[ckpt.name] = {**summary["summary"], "offline": summary.get("offline")}
-    return result
+    config = CollectConfig(runs=runs, val_runs=max(10, runs // 10), env=exploration_env(decision_hz))
+    collect(data, config, seed=0, workers=2)
+    ckpt = train(TrainConfig(model="depth", data=str(data), runs=runs), out / f"depth_n{runs}")
+    summary = evaluate(str(ckpt), out / "eval", EvalConfig(canyons=parse_canyon_set(canyons)))
+    return {**summary["summary"], "offline": summary.get("offline")}
 
 
 def _parallel(fn, args_list: list[tuple]) -> list:
@@ -164,7 +147,7 @@ def probe(
     if "oracle" in parts:
         result["oracle"] = _parallel(oracle_drive, [(hz, canyons) for hz in rates])
     if "dqn" in parts:
-        result["dqn"] = {str(hz): small_nets(hz, out / f"hz{hz:g}", dqn_runs, canyons) for hz in rates}
+        result["dqn"] = {f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons) for hz in rates}
     return result
 
 

@@ -36,6 +36,11 @@ def collect_results(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...])
     return results
 
 
+def _circling(runs: list[dict[str, Any]]) -> float:
+    """Share of runs that reached the time limit within 2 m of the spawn: the policy turned on the spot."""
+    return float(np.mean([r["end_reason"] == "time_limit" and r["distance"] < 2.0 for r in runs]))
+
+
 def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> list[dict[str, str]]:
     """The paper's Table I columns, mean (std) over seeds, one row per training-set size."""
     results = collect_results(out, subsets, seeds)
@@ -48,6 +53,7 @@ def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> 
             row[f"distance {label}"] = _mean_std([r["summary"]["distance_mean"] for r in runs], ".2f")
             row[f"success {label}"] = _mean_std([r["summary"]["successes"] for r in runs], ".1f")
             row[f"imitation {label}"] = _mean_std([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
+            row[f"circling {label}"] = _mean_std([_circling(r["runs"]) for r in runs], ".0%")
             row[f"seeds {label}"] = str(len(runs))
         coll, depth = results[f"coll_{n}"], results[f"depth_{n}"]
         row["cross-entropy CQN"] = _mean_std([r["offline"]["value"] for r in coll if "offline" in r], ".3f")
@@ -93,16 +99,24 @@ def csv_text(rows: list[dict[str, str]]) -> str:
 
 
 def table2_rows(stats: dict[str, Any], subsets: tuple[int, ...]) -> list[dict[str, str]]:
-    """Table II: runs, samples and samples without collision frames per subset."""
+    """Table II: runs, samples and samples without collision frames per subset, next to the paper's."""
+    from depthq.data.stats import PAPER_TABLE2
+
     wanted = {str(n) for n in subsets} | {"val"}
-    return [
-        {
-            "runs": row["subset"],
-            "samples (CQN)": str(row["samples"]),
-            "samples without collision (DQN)": str(row["samples_without_collision"]),
-            "mean run length": f"{row['mean_run_length']:.1f}",
-            "ended in collision": f"{row['collision_fraction']:.0%}",
-        }
-        for row in stats["table"]
-        if row["subset"] in wanted
-    ]
+    rows = []
+    for row in stats["table"]:
+        if row["subset"] not in wanted:
+            continue
+        paper = PAPER_TABLE2.get(int(row["subset"])) if row["subset"].isdigit() else None
+        rows.append(
+            {
+                "runs": row["subset"],
+                "samples (CQN)": str(row["samples"]),
+                "samples without collision (DQN)": str(row["samples_without_collision"]),
+                "paper: samples / without collision": f"{paper[0]} / {paper[1]}" if paper else "–",
+                "ours / paper": f"{row['samples'] / paper[0]:.2f}" if paper else "–",
+                "mean run length": f"{row['mean_run_length']:.1f}",
+                "ended in a bump": f"{row['collision_fraction']:.0%}",
+            }
+        )
+    return rows

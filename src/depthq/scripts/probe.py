@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     for row in result.get("oracle", []):
         print(f"oracle at {row['decision_hz']:g} Hz in {row['canyons']}: {row['successes']}/20, "
               f"{row['distance_mean']:.2f} m")
-    for hz, nets in result.get("dqn", {}).items():
-        for name, s in nets.items():
-            print(f"{name} at {hz} Hz: {s['successes']}/{s['runs']}, {s['distance_mean']:.2f} m")
+    for hz, s in result.get("dqn", {}).items():
+        print(f"Depth-Q-Net on {args.runs} runs at {hz} Hz in {args.canyons}: {s['successes']}/{s['runs']}, "
+              f"{s['distance_mean']:.2f} m")
     return 0

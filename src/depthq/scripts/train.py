@@ -18,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"epochs of 100 training + 10 validation batches (default {DEFAULT_EPOCHS})")
     p.add_argument("--trunk", default="efficientnet_lite0",
                    help="efficientnet_lite0 (frozen) or mobilenet_v1_025 (from scratch)")
-    p.add_argument("--lr", type=float, default=None, help="learning rate (default 0.1; the paper: 0.1 depth, 0.01 coll)")
+    p.add_argument("--lr", type=float, default=None,
+                   help="learning rate (default 0.1; the paper: 0.1 depth, 0.01 coll)")
     p.add_argument("--dropout", type=float, default=0.0,
                    help="dropout on the feature (paper: 0.5; see TrainConfig)")
     p.add_argument("--depth-loss", default="original",

@@ -59,7 +59,8 @@ class TrainState:
 
 
 def head_config(config: TrainConfig) -> HeadConfig:
-    return HeadConfig(config.model, TRUNKS[config.trunk].feature_dim, dropout=config.dropout)
+    feature_dim = TRUNKS[config.trunk].feature_dim
+    return HeadConfig(config.model, feature_dim, dropout=config.dropout, action_scale=config.action_scale)
 
 
 def build_qnet(config: TrainConfig) -> QNet:
@@ -124,6 +125,8 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
     new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
     differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
+    if old.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed
+        differing.append("learning_rate (the default for this model changed)")
     if old.get("data_fingerprint") != fingerprint:
         differing.append("data (the dataset's runs changed)")
     if differing:
