@@ -1,4 +1,4 @@
-"""The design choices of issue #10, measured on validation data and `val` canyons only.
+"""The design choices of issue #10, measured on validation data and `val` canyons only (docs/val_choices.md).
 
     python docs/val_choices.py runs/paper/data runs/val-choices [variant ...]
 
@@ -25,8 +25,8 @@ CANYONS = "val:1000-1019"
 # Each choice against its alternative; "action_scale" 1 is the head as it was before #10.
 VARIANTS: dict[str, dict] = {
     "depth_n200": {"model": "depth", "runs": 200, "action_scale": 1.0},
-    "depth_n200_lag1": {"model": "depth", "runs": 200, "action_scale": 1.0, "action_lag": 1},
     "depth_n200_action10": {"model": "depth", "runs": 200, "action_scale": 10.0},
+    "depth_n200_action10_lag1": {"model": "depth", "runs": 200, "action_scale": 10.0, "action_lag": 1},
     "coll_n500_lr0.01": {"model": "coll", "runs": 500, "action_scale": 1.0, "lr": 0.01},  # the paper's rate
     "coll_n500_lr0.1": {"model": "coll", "runs": 500, "action_scale": 1.0, "lr": 0.1},
     "coll_n500_lr0.1_action10": {"model": "coll", "runs": 500, "action_scale": 10.0, "lr": 0.1},

@@ -176,6 +176,7 @@ def test_heads_shapes_init_and_config():
     # action_scale s feeds s·a to the hidden layer: the same weights see action a as the plain head sees s·a
     scaled = build_head(HeadConfig("depth", 256, action_scale=10.0))
     scaled.load_state_dict(depth.state_dict())
+    scaled.eval(), depth.eval()  # no dropout
     torch.testing.assert_close(scaled(features, actions), depth(features, 10.0 * actions))
 
 
