@@ -76,3 +76,15 @@ def test_paper_stages_finish_seed_0_for_every_size_first(tmp_path):
         f"{net}_n{n}_s0" for n in (50, 100, 200, 500, 700, 900) for net in ("depth", "coll")
     )
     assert names.index("evaluate coll_n900_s0") < names.index("train depth_n50_s1")
+
+
+def test_probe_runs_every_part_end_to_end(tmp_path, capsys):
+    """`depthq probe`: Table II statistics, the oracle and a (one-epoch) Depth-Q-Net in a val canyon."""
+    out = tmp_path / "probe"
+    args = ["--hz", "4", "--stats-runs", "4", "--runs", "3", "--epochs", "1", "--canyons", "val:1000"]
+    assert main(["probe", *args, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "paper" in printed and "oracle at 4 Hz" in printed and "Depth-Q-Net on 3 runs at 4 Hz" in printed
+    result = read_json(out / "probe.json")
+    assert result["stats"][0]["runs"] == 4 and result["oracle"][0]["canyons"] == "val:1000"
+    assert result["dqn"]["4"]["runs"] == 1 and (out / "hz4" / "depth_n3" / "best.safetensors").is_file()

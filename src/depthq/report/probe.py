@@ -26,6 +26,7 @@ from tqdm import tqdm
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.data.stats import PAPER_TABLE2
 from depthq.errors import ConfigError
+from depthq.train.config import DEFAULT_EPOCHS
 
 PARTS = ("stats", "oracle", "dqn")
 VAL_CANYONS = "val:1000-1019"  # far from the validation runs' canyons (val:0..89)
@@ -108,7 +109,9 @@ def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: f
     }
 
 
-def small_dqn(decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYONS) -> dict:
+def small_dqn(
+    decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYONS, epochs: int = DEFAULT_EPOCHS
+) -> dict:
     """Collect `runs` OU runs at `decision_hz`, train a Depth-Q-Net on them, drive it in `canyons`."""
     from depthq.data.collect import CollectConfig, collect, exploration_env
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
@@ -116,9 +119,9 @@ def small_dqn(decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYO
     from depthq.train.trainer import train
 
     data = out / "data"
-    config = CollectConfig(runs=runs, val_runs=max(10, runs // 10), env=exploration_env(decision_hz))
+    config = CollectConfig(runs=runs, val_runs=max(2, runs // 10), env=exploration_env(decision_hz))
     collect(data, config, seed=0, workers=2)
-    ckpt = train(TrainConfig(model="depth", data=str(data), runs=runs), out / f"depth_n{runs}")
+    ckpt = train(TrainConfig(model="depth", data=str(data), runs=runs, epochs=epochs), out / f"depth_n{runs}")
     summary = evaluate(str(ckpt), out / "eval", EvalConfig(canyons=parse_canyon_set(canyons)))
     return {**summary["summary"], "offline": summary.get("offline")}
 
@@ -136,6 +139,7 @@ def probe(
     stats_runs: int = 300,
     dqn_runs: int = 200,
     canyons: str = VAL_CANYONS,
+    epochs: int = DEFAULT_EPOCHS,
 ) -> dict[str, Any]:
     """Run the chosen parts at each rate; returns (and the CLI writes) everything measured."""
     unknown = sorted(set(parts) - set(PARTS))
@@ -147,7 +151,9 @@ def probe(
     if "oracle" in parts:
         result["oracle"] = _parallel(oracle_drive, [(hz, canyons) for hz in rates])
     if "dqn" in parts:
-        result["dqn"] = {f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons) for hz in rates}
+        result["dqn"] = {
+            f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons, epochs) for hz in rates
+        }
     return result
 
 

@@ -21,6 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--parts", default="stats,oracle,dqn", help="some of stats, oracle, dqn")
     p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
     p.add_argument("--runs", type=int, default=200, help="training runs of the small Depth-Q-Net")
+    p.add_argument("--epochs", type=int, default=40, help="training epochs of the small Depth-Q-Net")
     p.add_argument("--canyons", default="val:1000-1019", help="val canyons to drive in (never eval)")
     p.add_argument("--out", type=Path, required=True, help="folder for probe.json and the small runs")
 
@@ -31,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     if args.canyons.startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")
     parts = tuple(args.parts.split(","))
-    result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons)
+    result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "probe.json").write_text(json.dumps(result, indent=1))
     if "stats" in result:
