@@ -58,7 +58,6 @@ class EvalConfig:
         if self.which not in ("best", "last"):
             raise ConfigError(f"--which must be 'best' or 'last', got {self.which!r}")
 
-
     @property
     def env(self) -> EnvConfig:
         world = WorldConfig() if self.decision_hz is None else WorldConfig(decision_hz=self.decision_hz)

@@ -3,7 +3,8 @@ contact with a wall or the time limit. Gymnasium env `depthq/Canyon-v0`.
 
 Observation: {"image": uint8 (308, 410, 3) camera frame with pixel noise,
               "scan": float32 (360,) LiDAR (index = bearing in degrees, CCW; inf = nothing in range,
-                      0 = invalid), "bins": float32 (26,) depth bins left→right (NaN = invalid)}.
+                      0 = invalid), "bins": float32 (26,) depth bins left→right (an invalid reading
+                      counts as far, as in the original: `BinConfig.invalid_as_far`)}.
 Action: yaw rate in rad/s, shape (1,), clipped to ±`world.max_yaw_rate` (1 by default); +a turns left.
 One step is one camera frame: `world.decision_hz` decisions per second.
 Reward: metres gained on the furthest straight-line distance from the spawn point (what Table I measures).
@@ -61,8 +62,8 @@ class CanyonEnv(gym.Env):
     def __init__(
         self, config: EnvConfig | None = None, render_mode: str | None = None, camera: bool = True
     ) -> None:
-        """`camera=False` skips rendering (the image stays black): run statistics and the LiDAR
-        oracle need no pixels and run ~10× faster."""
+        """`camera=False` skips rendering (the image stays black), for what needs no pixels: run
+        statistics and the LiDAR oracle (`depthq.report.probe`)."""
         self.config = config or EnvConfig()
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"unknown render_mode {render_mode!r}; expected None or 'rgb_array'")
