@@ -34,7 +34,8 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=preset.subsets))
     t2 = table2_rows(stats, preset.subsets)
     note = (
-        f"mean (std) over {len(preset.seeds)} seed(s); {preset.canyons} canyons, {preset.time_limit_s:.0f} s "
+        f"mean (std) over the seeds evaluated so far (columns 'seeds'; the preset has {len(preset.seeds)}); "
+        f"{preset.canyons} canyons, {preset.decision_hz:g} decisions/s, {preset.time_limit_s:.0f} s "
         f"per run; success = more than 15 m from the spawn. Trunk: EfficientNet-Lite0 (frozen) instead of "
         f"the paper's MobileNet-v1-0.25.\n"
     )
