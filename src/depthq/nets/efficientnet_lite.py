@@ -139,13 +139,17 @@ class EfficientNetLite0(nn.Module):
         # Classifier dropout (0.2) is left out: the classifier is only used in eval mode, by tests.
         self._fc = nn.Linear(FEATURE_DIM, N_CLASSES)
 
-    def feature_map(self, images: torch.Tensor) -> torch.Tensor:
-        """(B, 1280, ceil(H/32), ceil(W/32)) map after the head conv."""
+    def block_map(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 320, ceil(H/32), ceil(W/32)) output of the last MBConv block, before the head conv."""
         x = images * (255.0 / 128.0) - (127.0 / 128.0)  # [0,1] → (255·x − 127) / 128
         x = F.relu6(self._bn0(self._conv_stem(x)))
         for block in self._blocks:
             x = block(x)
-        return F.relu6(self._bn1(self._conv_head(x)))
+        return x
+
+    def feature_map(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 1280, ceil(H/32), ceil(W/32)) map after the head conv."""
+        return F.relu6(self._bn1(self._conv_head(self.block_map(images))))
 
     def features(self, images: torch.Tensor) -> torch.Tensor:
         """(B, 1280) globally average-pooled feature."""

@@ -30,7 +30,6 @@ from depthq.errors import ConfigError
 from depthq.report.presets import Preset, get_preset
 
 NETS = ("depth", "coll")
-TRUNK, INPUT_SIZE = "efficientnet_lite0", 128
 
 
 @dataclass(frozen=True)
@@ -53,6 +52,7 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
     from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
     from depthq.data.manifest import Dataset
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE
     from depthq.train.checkpoint import saved_epoch
     from depthq.train.config import TrainConfig
     from depthq.train.features import features_ready, load_features
@@ -78,8 +78,8 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
         ),
         Stage(
             "features",
-            lambda: features_ready(Dataset.open(data), TRUNK, INPUT_SIZE),
-            lambda: load_features(Dataset.open(data), TRUNK, INPUT_SIZE),
+            lambda: features_ready(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE),
+            lambda: load_features(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE),
         ),
     ]
     for ref in ("heuristic", "ou"):

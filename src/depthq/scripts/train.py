@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.nets.trunk import DEFAULT_TRUNK
 from depthq.train.config import DEFAULT_EPOCHS
 
 
@@ -16,8 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="checkpoint folder (created, or resumed)")
     p.add_argument("--epochs", type=int, default=DEFAULT_EPOCHS,
                    help=f"epochs of 100 training + 10 validation batches (default {DEFAULT_EPOCHS})")
-    p.add_argument("--trunk", default="efficientnet_lite0",
-                   help="efficientnet_lite0 (frozen) or mobilenet_v1_025 (from scratch)")
+    p.add_argument("--trunk", default=DEFAULT_TRUNK,
+                   help=f"{DEFAULT_TRUNK} (frozen, default), efficientnet_lite0 (frozen, globally pooled) "
+                   "or mobilenet_v1_025 (from scratch)")
     p.add_argument("--lr", type=float, default=None,
                    help="learning rate (default 0.1; the paper: 0.1 depth, 0.01 coll)")
     p.add_argument("--dropout", type=float, default=0.0,

@@ -11,7 +11,7 @@ from depthq.errors import ConfigError
 from depthq.nets.heads import HEAD_KINDS
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
-from depthq.nets.trunk import INPUT_SIZE, TRUNKS
+from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
 
 # SPEC §1.6: Depth-Q-Net 0.1, Coll-Q-Net 0.01. Coll-Q-Net's 0.01 under-trains it in our 40-epoch budget
 # (the paper ran up to 1000): on 500 runs of the 4 Hz paper dataset, seed 0, its validation loss
@@ -55,7 +55,7 @@ class TrainConfig:
     rho: float = RHO
     eps: float = EPS
     weight_decay: float = WEIGHT_DECAY
-    trunk: str = "efficientnet_lite0"
+    trunk: str = DEFAULT_TRUNK  # see depthq.nets.trunk
     # The paper drops out 0.5 of the feature. On the frozen 1280-d EfficientNet-Lite0 feature that
     # makes eval-mode predictions far off the train-mode ones (L1 0.61 vs 0.26 m on the training
     # data itself, 200 runs): validation L1 after 1000 steps is 0.197 (p=0), 0.219 (0.1), 0.296

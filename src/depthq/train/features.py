@@ -16,8 +16,8 @@ rewriting a run invalidates the cache. A recompute first deletes index.json, wri
 a temporary sibling and renames it into place, then writes index.json: an interrupted
 computation is never read as complete (it starts over on the next call).
 
-float16 keeps the cache at half the size; EfficientNet-Lite0 features are ReLU6 outputs averaged
-over the map, in [0, 6], so rounding errs by at most 2⁻¹¹ relative (≤ 0.003 absolute).
+float16 keeps the cache at half the size; EfficientNet-Lite0 features are averages of activations
+of magnitude < 10, so rounding errs by at most 2⁻¹¹ relative (< 0.005 absolute).
 """
 
 from __future__ import annotations
