@@ -30,10 +30,10 @@ from depthq.configio import from_dict
 from depthq.control.action_selection import depth_scores
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
+from depthq.nets.checkpoint import load_qnet
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.sensors import LidarConfig, depth_bins, finish_scan
 from depthq.sim.world import CanyonWorld, WorldConfig
-from depthq.train.checkpoint import load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 

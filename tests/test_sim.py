@@ -2,6 +2,8 @@
 
 import json
 import math
+import subprocess
+import sys
 
 import gymnasium
 import numpy as np
@@ -148,6 +150,20 @@ def test_env_checker_passes_and_registered_id_builds():
     e = gymnasium.make(depthq.sim.ENV_ID)
     check_env(e.unwrapped, skip_render_check=False)
     e.close()
+
+
+@pytest.mark.parametrize(
+    "code",
+    [
+        "import gymnasium, depthq; e = gymnasium.make('depthq/Canyon-v0')",  # `import depthq` registers
+        "import gymnasium; e = gymnasium.make('depthq:depthq/Canyon-v0')",  # gymnasium imports depthq
+    ],
+)
+def test_env_id_works_as_in_every_gymnasium_package(code: str) -> None:
+    """In a fresh interpreter, where nothing has imported depthq.sim yet."""
+    check = code + "; obs, _ = e.reset(seed=0); assert obs['image'].shape == (308, 410, 3); e.close()"
+    result = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
 
 
 def test_randomized_appearance_changes_colours_not_geometry():

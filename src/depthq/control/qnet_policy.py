@@ -12,6 +12,7 @@ import torch
 from depthq.control.action_selection import select_coll_action, select_depth_action
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
+from depthq.nets.checkpoint import load_qnet
 from depthq.nets.heads import QNet, probability
 from depthq.nets.trunk import preprocess
 
@@ -48,8 +49,6 @@ class QNetPolicy:
     def from_checkpoint(
         cls, folder: Path, which: str = "best", actions: tuple[float, ...] = DEFAULT_ACTIONS
     ) -> QNetPolicy:
-        from depthq.train.checkpoint import load_qnet
-
         net, config = load_qnet(Path(folder), which=which)
         kind = config["train"]["model"]
         return cls(

@@ -67,7 +67,7 @@ class EvalConfig:
 def data_rate(policy_spec: str) -> float:
     """The decision rate of a checkpoint's training data; the default rate for any other policy."""
     from depthq.data.manifest import Dataset
-    from depthq.train.checkpoint import read_config
+    from depthq.nets.checkpoint import read_config
 
     if not Path(policy_spec).is_dir():
         return DEFAULT_DECISION_HZ

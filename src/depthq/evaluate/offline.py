@@ -12,8 +12,8 @@ import torch
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
+from depthq.nets.checkpoint import load_qnet
 from depthq.nets.trunk import preprocess
-from depthq.train.checkpoint import load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.trainer import loss_function

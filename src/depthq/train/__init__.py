@@ -2,6 +2,7 @@
 
 Modules, one concept each: `config` (every hyper-parameter, `TrainConfig`), `features` (the
 on-disk cache of frozen-trunk features), `samples` (training batches from cached features or from
-images), `checkpoint` (the output folder: weights, resume state, metrics; `load_qnet`), `trainer`
+images), `checkpoint` (writing the output folder: weights, resume state, metrics; reading a network
+back is `depthq.nets.checkpoint.load_qnet`), `trainer`
 (the loop, `train`), `bench` (speed of head training and of feature extraction).
 """

@@ -17,7 +17,8 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
     last_state.json          a readable copy of that metadata (never read back)
     tb/                      TensorBoard event files (a log: appended, purged of stale epochs on resume)
 
-Weights are safetensors, never pickles. `load_qnet` rebuilds a network from this folder.
+Weights are safetensors, never pickles, each carrying the SHA-256 of its tensor bytes; reading a
+checkpoint back (`depthq.nets.checkpoint.load_qnet`, below both training and policies) checks it.
 """
 
 from __future__ import annotations
@@ -32,21 +33,26 @@ from typing import Any
 import numpy as np
 import torch
 from safetensors import SafetensorError, safe_open
-from safetensors.torch import save as save_safetensors
 
-from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
+from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
 from depthq.errors import ConfigError, DataError
-from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
+from depthq.nets.checkpoint import (
+    CONFIG,
+    FORMAT,
+    load_trainable_state,
+    read_config,
+    read_weights,
+    stored_parts,
+    weights_bytes,
+)
+from depthq.nets.heads import HeadConfig, QNet, build_head
 from depthq.nets.trunk import TRUNKS, build_trunk
 from depthq.train.config import TrainConfig
 
-CONFIG = "config.json"
 STATE = "last_state.safetensors"
 METRICS = "metrics.csv"
-FORMAT = "depthq-checkpoint"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: every weight file records its SHA-256
 METRIC_FIELDS = ("epoch", "train_loss", "val_loss", "val_loss_std", "seconds")
-WHICH = ("best", "last")
 
 
 @dataclass
@@ -68,24 +74,10 @@ def build_qnet(config: TrainConfig) -> QNet:
     return QNet(build_trunk(config.trunk), build_head(head_config(config)))
 
 
-def _stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:
-    """The modules a checkpoint stores: the head, plus the trunk when it is trained."""
-    return [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
-
-
 def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
     """The weights a checkpoint stores, named "<part>.<parameter>"."""
-    parts = _stored_parts(model)
+    parts = stored_parts(model)
     return {f"{name}.{k}": t.detach().contiguous() for name, m in parts for k, t in m.state_dict().items()}
-
-
-def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Path) -> None:
-    try:
-        for name, module in _stored_parts(model):
-            prefix = f"{name}."
-            module.load_state_dict({k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)})
-    except RuntimeError as err:
-        raise ConfigError(f"{path}: weights do not fit the network of its config.json ({err})") from err
 
 
 # --- starting and resuming -------------------------------------------------------------------------
@@ -163,9 +155,9 @@ def save_epoch(
         "best": state.best,
         "param_groups": optim["param_groups"],
     }
-    atomic_write_bytes(out / STATE, save_safetensors(tensors, metadata={"state": json.dumps(meta)}))
+    atomic_write_bytes(out / STATE, weights_bytes(tensors, {"state": json.dumps(meta)}))
     write_json(out / "last_state.json", meta)
-    blob = save_safetensors(weights, metadata={"epoch": str(state.epoch)})
+    blob = weights_bytes(weights, {"epoch": str(state.epoch)})
     atomic_write_bytes(out / "last.safetensors", blob)
     write_json(out / "last.json", state.history[-1])
     if is_best:
@@ -197,7 +189,7 @@ def load_state(
     path = out / STATE
     if not path.is_file():
         return TrainState()
-    tensors, metadata = _read_safetensors(path)
+    tensors, metadata = read_weights(path)
     try:
         meta = json.loads(metadata["state"])
         load_trainable_state(model, {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}, path)
@@ -212,53 +204,3 @@ def load_state(
         return TrainState(int(meta["epoch"]), meta["history"], meta["best"])
     except (KeyError, ValueError, TypeError) as err:
         raise DataError(f"{path}: not a valid resume state ({err})") from err
-
-
-# --- loading a trained network ---------------------------------------------------------------------
-
-
-def load_qnet(
-    folder: Path, which: str = "best", model: str | None = None, trunk: str | None = None
-) -> tuple[QNet, dict[str, Any]]:
-    """The trained network in `folder` in eval mode, and its config.json.
-
-    `which` is "best" (lowest validation loss) or "last". `model` / `trunk`, when given, must be what
-    the folder holds. A missing or incomplete folder, or one that does not match → ConfigError.
-    """
-    folder = Path(folder)
-    if which not in WHICH:
-        raise ConfigError(f"checkpoint weights must be one of {WHICH}, got {which!r}")
-    if not folder.is_dir():
-        raise ConfigError(f"{folder}: no such checkpoint folder")
-    record = read_config(folder)
-    config = from_dict(TrainConfig, record.get("train", {}))
-    if record.get("head", {}).get("kind") not in HEAD_KINDS or config.model != record["head"]["kind"]:
-        raise ConfigError(f"{folder / CONFIG}: unknown model kind {record.get('head', {}).get('kind')!r}")
-    for asked, held, what in ((model, config.model, "model"), (trunk, config.trunk, "trunk")):
-        if asked is not None and asked != held:
-            raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
-    path = folder / f"{which}.safetensors"
-    if not path.is_file():
-        raise ConfigError(f"{folder}: incomplete checkpoint, no {path.name} (no epoch finished yet?)")
-    net = build_qnet(config)
-    load_trainable_state(net, _read_safetensors(path)[0], path)
-    return net.eval(), record
-
-
-def read_config(folder: Path) -> dict[str, Any]:
-    path = folder / CONFIG
-    if not path.is_file():
-        raise ConfigError(f"{folder}: not a checkpoint folder (no {CONFIG})")
-    record = read_json(path)
-    found = record.get("format") if isinstance(record, dict) else record
-    if found != FORMAT:
-        raise ConfigError(f"{path}: not a {FORMAT} config (format {found!r})")
-    return record
-
-
-def _read_safetensors(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
-    try:
-        with safe_open(path, framework="pt") as f:
-            return {key: f.get_tensor(key) for key in f.keys()}, f.metadata() or {}  # noqa: SIM118
-    except (SafetensorError, OSError) as err:
-        raise DataError(f"{path}: not a readable safetensors file ({err})") from err
