@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.report.tables import NET_LABELS, collect_results
+from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results
 
 
 def _read_metrics(path: Path) -> dict[str, np.ndarray]:
@@ -74,10 +74,15 @@ def plot_success_vs_runs(out: Path, subsets: tuple[int, ...], seeds: tuple[int, 
                 std.append(np.std(succ))
         if xs:
             ax.errorbar(xs, mean, yerr=std, marker="o", capsize=3, color=colour, label=NET_LABELS[net])
+        paper = [(n, PAPER_TABLE1[n][net][1]) for n in subsets if n in PAPER_TABLE1]
+        if paper:
+            label = f"{NET_LABELS[net]}, paper"
+            ax.plot(*zip(*paper, strict=True), "--", color=colour, alpha=0.6, label=label)
     ax.set_xlabel("training runs")
     ax.set_ylabel("successes (distance > 15 m)")
     ax.set_xscale("log")
     ax.set_xticks(list(subsets), [str(n) for n in subsets])
+    ax.minorticks_off()  # the sizes themselves, not 4×10¹ …
     ax.legend()
     ax.grid(alpha=0.3)
     fig.tight_layout()

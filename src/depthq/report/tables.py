@@ -12,6 +12,15 @@ import numpy as np
 from depthq.configio import read_json
 
 NET_LABELS = {"coll": "CQN", "depth": "DQN"}
+# The paper's Table I (mean over its 3 seeds), for comparison only: runs → net → (distance m, successes /20).
+PAPER_TABLE1: dict[int, dict[str, tuple[float, float]]] = {
+    50: {"coll": (1.07, 0.0), "depth": (1.68, 0.0)},
+    100: {"coll": (1.04, 0.0), "depth": (4.91, 0.7)},
+    200: {"coll": (2.69, 0.0), "depth": (12.19, 8.0)},
+    500: {"coll": (6.72, 2.7), "depth": (21.96, 20.0)},
+    700: {"coll": (8.32, 4.7), "depth": (22.21, 20.0)},
+    900: {"coll": (14.14, 11.3), "depth": (22.30, 20.0)},
+}
 
 
 def _mean_std(values: list[float], fmt: str) -> str:
@@ -58,6 +67,8 @@ def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> 
         coll, depth = results[f"coll_{n}"], results[f"depth_{n}"]
         row["cross-entropy CQN"] = _mean_std([r["offline"]["value"] for r in coll if "offline" in r], ".3f")
         row["abs diff DQN"] = _mean_std([r["offline"]["value"] for r in depth if "offline" in r], ".3f")
+        paper = PAPER_TABLE1.get(n)
+        row["paper: success CQN / DQN"] = f"{paper['coll'][1]} / {paper['depth'][1]}" if paper else "–"
         rows.append(row)
     return rows
 
