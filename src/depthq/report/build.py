@@ -11,14 +11,13 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
+from depthq.report.layout import model_name
 from depthq.report.presets import Preset
 from depthq.report.tables import csv_text, markdown, reference_rows, table1_rows, table2_rows
 
 
 def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
     """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4)."""
-    from depthq.report.reproduce import model_name
-
     best, best_distance = None, -1.0
     for n in preset.subsets:
         for s in preset.seeds:

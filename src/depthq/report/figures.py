@@ -11,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from depthq.report.layout import model_name
 from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results
 
 
@@ -24,8 +25,6 @@ def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path:
     """Training and validation loss per epoch for each subset size (top), and the standard deviation
     of the per-sample validation loss over a batch (bottom: the paper's over-fitting signal), each
     averaged over seeds. The spread gets its own row: drawn as bands, six sizes hide each other."""
-    from depthq.report.reproduce import model_name
-
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(subsets)))
     for column, net in enumerate(("depth", "coll")):

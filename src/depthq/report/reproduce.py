@@ -27,9 +27,8 @@ from tqdm import tqdm
 
 from depthq.configio import provenance, read_json, to_dict, write_json
 from depthq.errors import ConfigError
+from depthq.report.layout import NETS, model_name
 from depthq.report.presets import Preset, get_preset
-
-NETS = ("depth", "coll")
 
 
 @dataclass(frozen=True)
@@ -37,10 +36,6 @@ class Stage:
     name: str
     done: Callable[[], bool]
     run: Callable[[], object]
-
-
-def model_name(net: str, runs: int, seed: int) -> str:
-    return f"{net}_n{runs}_s{seed}"
 
 
 def _eval_done(folder: Path) -> bool:

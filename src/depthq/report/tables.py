@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from depthq.configio import read_json
+from depthq.report.layout import NETS, model_name
 
 NET_LABELS = {"coll": "CQN", "depth": "DQN"}
 # The paper's Table I (mean over its 3 seeds), for comparison only: runs → net → (distance m, successes /20).
@@ -31,8 +32,6 @@ def _mean_std(values: list[float], fmt: str) -> str:
 
 def collect_results(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> dict[str, Any]:
     """Per (net, n): the per-seed summaries of the evaluations that exist."""
-    from depthq.report.reproduce import NETS, model_name
-
     results: dict[str, Any] = {}
     for n in subsets:
         for net in NETS:
