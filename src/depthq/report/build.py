@@ -9,11 +9,19 @@ from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
+from depthq.nets.trunk import DEFAULT_TRUNK
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
 from depthq.report.layout import model_name
 from depthq.report.presets import Preset
-from depthq.report.tables import csv_text, markdown, reference_rows, table1_rows, table2_rows
+from depthq.report.tables import (
+    csv_text,
+    markdown,
+    per_seed_rows,
+    reference_rows,
+    table1_rows,
+    table2_rows,
+)
 
 
 def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
@@ -29,19 +37,21 @@ def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
 
 def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> None:
     t1 = table1_rows(out, preset.subsets, preset.seeds)
+    seeds = per_seed_rows(out, preset.subsets, preset.seeds)
     refs = reference_rows(out)
     stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=preset.subsets))
     t2 = table2_rows(stats, preset.subsets)
     note = (
         f"mean (std) over the seeds evaluated so far (columns 'seeds'; the preset has {len(preset.seeds)}); "
         f"{preset.canyons} canyons, {preset.decision_hz:g} decisions/s, {preset.time_limit_s:.0f} s "
-        f"per run; success = more than 15 m from the spawn. Trunk: EfficientNet-Lite0 (frozen) instead of "
-        f"the paper's MobileNet-v1-0.25.\n"
+        f"per run; success = more than 15 m from the spawn. Trunk: {DEFAULT_TRUNK} (frozen "
+        f"EfficientNet-Lite0, its last map in 4 image columns) instead of the paper's MobileNet-v1-0.25.\n"
     )
     atomic_write_bytes(
         out / "table1.md",
         (
-            "# Table I\n\n" + note + "\n" + markdown(t1) + "\n## Reference policies "
+            "# Table I\n\n" + note + "\n" + markdown(t1) + "\n## Per seed\n\n" + markdown(seeds)
+            + "\n## Reference policies "
             "(mean (std) over canyons)\n\n" + markdown(refs)
         ).encode(),
     )
@@ -62,7 +72,8 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
         [
             (
                 "Table I",
-                f"<p>{note}</p>" + page.table(t1) + "<h3>Reference policies</h3>" + page.table(refs),
+                f"<p>{note}</p>" + page.table(t1) + "<h3>Per seed</h3>" + page.table(seeds)
+                + "<h3>Reference policies</h3>" + page.table(refs),
             ),
             ("Success rate against training runs", page.img(out / "success_vs_runs.png", "success vs runs")),
             ("Table II", page.table(t2)),

@@ -72,6 +72,23 @@ def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> 
     return rows
 
 
+def per_seed_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> list[dict[str, str]]:
+    """Successes / mean distance of every seed: the spread that a mean (std) over 3 seeds hides."""
+    results = collect_results(out, subsets, seeds)
+    rows = []
+    for n in subsets:
+        row = {"runs": str(n)}
+        for net in ("depth", "coll"):
+            summaries = [r["summary"] for r in results[f"{net}_{n}"]]
+            cells = [f"{s['successes']}/{s['distance_mean']:.1f}" for s in summaries]
+            row[f"{NET_LABELS[net]}: successes/m per seed"] = ", ".join(cells) or "–"
+        paper = PAPER_TABLE1.get(n)
+        cells = [f"{paper[net][1]}/{paper[net][0]}" for net in ("depth", "coll")] if paper else ["–"]
+        row["paper DQN, CQN (mean)"] = ", ".join(cells)
+        rows.append(row)
+    return rows
+
+
 def reference_rows(out: Path) -> list[dict[str, str]]:
     """The heuristic expert and OU exploration: mean (std) over canyons."""
     rows = []
