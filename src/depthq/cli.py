@@ -20,6 +20,7 @@ VERBS: dict[str, str] = {
     "evaluate": "evaluate",
     "reproduce": "reproduce",
     "probe": "probe",
+    "export": "export",
 }
 
 

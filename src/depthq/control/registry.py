@@ -1,4 +1,5 @@
-"""Build any policy from its name on the command line: 'heuristic', 'ou' or a checkpoint folder."""
+"""Build any policy from its name on the command line: 'heuristic', 'ou', a checkpoint folder or
+'onnx:PATH' (a graph written by `depthq export`)."""
 
 from __future__ import annotations
 
@@ -13,15 +14,21 @@ BUILTIN = ("heuristic", "ou")
 
 
 def make_policy(spec: str, seed: int | None = None, which: str = "best") -> Policy:
-    """`spec` is 'heuristic', 'ou' or the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
-    (`which` weights: 'best' validation or 'last')."""
+    """`spec` is 'heuristic', 'ou', the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
+    (`which` weights: 'best' validation or 'last') or 'onnx:PATH'."""
     if spec == "heuristic":
         return DepthHeuristic()
     if spec == "ou":
         return OUPolicy(seed=seed)
+    if spec.startswith("onnx:"):
+        from depthq.control.onnx_policy import OnnxPolicy
+
+        return OnnxPolicy(Path(spec.removeprefix("onnx:")))
     path = Path(spec)
     if path.is_dir():
         from depthq.control.qnet_policy import QNetPolicy
 
         return QNetPolicy.from_checkpoint(path, which=which)
-    raise ConfigError(f"unknown policy {spec!r}: expected one of {BUILTIN} or an existing checkpoint folder")
+    raise ConfigError(
+        f"unknown policy {spec!r}: expected one of {BUILTIN}, an existing checkpoint folder or onnx:PATH"
+    )

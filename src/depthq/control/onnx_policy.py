@@ -1,0 +1,70 @@
+"""A policy from an exported ONNX graph (`depthq export`): onnxruntime and numpy only, as on a robot.
+
+The graph maps a uint8 frame and the candidate actions to per-action values; the actions and the
+selection rule come from the file's metadata, so the file alone defines the policy.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from depthq.control.action_selection import select_coll_action, select_depth_action
+from depthq.control.policy import Observation
+from depthq.errors import ConfigError, DataError
+
+
+class OnnxPolicy:
+    """Greedy policy of an exported Q-net; `last_values` as in `QNetPolicy`."""
+
+    def __init__(self, path: Path, threads: int | None = None) -> None:
+        try:
+            import onnxruntime as ort
+        except ImportError as err:
+            raise ConfigError('ONNX policies need onnxruntime: pip install "depthq[deploy]"') from err
+        path = Path(path)
+        if not path.is_file():
+            raise ConfigError(f"onnx:{path}: no such file")
+        options = ort.SessionOptions()
+        if threads is not None:
+            options.intra_op_num_threads = threads
+        try:
+            self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+        except Exception as err:  # onnxruntime raises its own exception types for unreadable models
+            raise DataError(f"{path}: not a readable ONNX model ({err})") from err
+        meta = self.session.get_modelmeta().custom_metadata_map
+        try:
+            self.kind = meta["depthq.kind"]
+            self.actions = np.asarray(json.loads(meta["depthq.actions"]), np.float64)
+            self.frame_size = tuple(json.loads(meta["depthq.frame_size"]))
+        except (KeyError, ValueError) as err:
+            raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
+        self._actions = self.actions.astype(np.float32)
+        self.path = path
+        self.name = f"ONNX:{path.stem}"
+        self.last_values: np.ndarray | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        """Stateless between frames."""
+
+    def values(self, image: np.ndarray) -> np.ndarray:
+        """Per-action predictions for one uint8 frame (H, W, 3): bins (K, n_bins) or probabilities (K,)."""
+        if image.dtype != np.uint8 or image.shape != (*self.frame_size, 3):
+            raise ConfigError(
+                f"{self.path.name}: expected a uint8 frame {(*self.frame_size, 3)}, "
+                f"got {image.dtype} {image.shape}"
+            )
+        return self.session.run(None, {"frame": image, "actions": self._actions})[0]
+
+    def act(self, obs: Observation) -> float:
+        self.last_values = self.values(obs["image"])
+        if self.kind == "depth":
+            return select_depth_action(self.last_values, self.actions)
+        return select_coll_action(self.last_values, self.actions)
+
+    def describe(self) -> dict[str, Any]:
+        actions = self.actions.tolist()
+        return {"policy": self.name, "kind": self.kind, "onnx": str(self.path), "actions": actions}

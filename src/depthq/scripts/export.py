@@ -1,0 +1,31 @@
+"""Export a trained Q-net as one ONNX graph (frame in, per-action values out) for a robot."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from depthq.errors import ConfigError
+
+
+def _frame_size(text: str) -> tuple[int, int]:
+    try:
+        height, width = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ConfigError(f"--frame-size must be HEIGHTxWIDTH, e.g. 308x410; got {text!r}") from None
+    return height, width
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("checkpoint", type=Path, help="a checkpoint folder written by `depthq train`")
+    p.add_argument("--out", type=Path, required=True, help="folder for <checkpoint name>.onnx")
+    p.add_argument("--which", default="best", help="best (lowest validation loss) or last")
+    p.add_argument("--frame-size", default="308x410", help="camera frame the graph takes, HEIGHTxWIDTH")
+
+
+def run(args: argparse.Namespace) -> int:
+    from depthq.deploy.onnx_export import export_onnx
+
+    path = export_onnx(args.checkpoint, args.out, which=args.which, frame_size=_frame_size(args.frame_size))
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB); drive it with the policy onnx:{path}")
+    return 0

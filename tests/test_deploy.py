@@ -1,0 +1,95 @@
+"""ONNX export: the real exporter, onnx.checker and onnxruntime against the torch policy."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import onnx
+import pytest
+import torch
+
+from depthq.cli import main
+from depthq.control.onnx_policy import OnnxPolicy
+from depthq.control.qnet_policy import QNetPolicy
+from depthq.data.collect import CollectConfig, collect
+from depthq.data.manifest import Dataset
+from depthq.deploy.onnx_export import FrameResize, export_onnx
+from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.trunk import preprocess
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+
+FAST = {"epochs": 1, "train_batches": 4, "val_batches": 1, "batch_size": 16}
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A tiny dataset and a Depth-Q-Net and a Coll-Q-Net trained on it for one short epoch."""
+    root = tmp_path_factory.mktemp("deploy")
+    data = root / "data"
+    collect(data, CollectConfig(runs=4, val_runs=1, max_steps=60), seed=0, workers=1, progress=False)
+    folders = {"data": data}
+    for model in ("depth", "coll"):
+        config = TrainConfig(model=model, data=str(data), **FAST)
+        folders[model] = train(config, root / model, progress=False)
+    return folders
+
+
+def _val_frames(data: Path) -> list[np.ndarray]:
+    dataset = Dataset.open(data)
+    frames = []
+    for entry in dataset.entries("val"):
+        with dataset.reader(entry) as reader:
+            frames += [reader.image(t) for t in range(entry.n_frames)]
+    return frames
+
+
+def test_resize_in_the_graph_is_preprocess_to_the_bit(trained: dict[str, Path]) -> None:
+    frames = _val_frames(trained["data"])[:10]
+    resize = FrameResize(frames[0].shape[:2], 128)
+    for frame in frames:
+        assert torch.equal(resize(torch.from_numpy(frame)), preprocess(frame))
+    other = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)  # another camera
+    assert torch.equal(FrameResize((240, 320), 96)(torch.from_numpy(other)), preprocess(other, 96))
+
+
+@pytest.mark.parametrize("model", ["depth", "coll"])
+def test_onnx_predictions_equal_torch(trained: dict[str, Path], tmp_path: Path, model: str) -> None:
+    path = export_onnx(trained[model], tmp_path / "onnx")
+    onnx.checker.check_model(onnx.load(path), full_check=True)
+    meta = {p.key: p.value for p in onnx.load(path).metadata_props}
+    assert meta["depthq.kind"] == model and meta["depthq.actions"] == "[-1.0, 0.0, 1.0]"
+    assert '"trunk": "efficientnet_lite0_columns"' in meta["depthq.config"]
+
+    onnx_policy, torch_policy = OnnxPolicy(path), QNetPolicy.from_checkpoint(trained[model])
+    frames = _val_frames(trained["data"])
+    worst = max(np.abs(onnx_policy.values(f) - torch_policy.values(f)).max() for f in frames)
+    assert worst < 1e-4, worst
+    assert onnx_policy.values(frames[0]).shape == ((3, 26) if model == "depth" else (3,))
+    with pytest.raises(ConfigError, match=r"uint8 frame \(308, 410, 3\)"):
+        onnx_policy.values(frames[0][:100])
+
+
+def test_onnx_policy_drives_as_the_checkpoint(trained: dict[str, Path], tmp_path: Path) -> None:
+    path = export_onnx(trained["depth"], tmp_path / "onnx")
+    config = EvalConfig(canyons=parse_canyon_set("val:1000-1001"), time_limit_s=6.0)
+    rows = {}
+    for name, spec in (("torch", str(trained["depth"])), ("onnx", f"onnx:{path}")):
+        evaluate(spec, tmp_path / name, config, workers=1, progress=False)
+        with (tmp_path / name / "runs.csv").open() as f:
+            rows[name] = [(r["canyon"], r["distance"], r["steps"], r["end_reason"])
+                          for r in csv.DictReader(f)]
+    assert rows["onnx"] == rows["torch"]
+
+
+def test_export_cli_refuses_bad_input_and_writes_nothing(trained: dict[str, Path], tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    assert main(["export", str(tmp_path / "missing"), "--out", str(out)]) == 2
+    assert main(["export", str(trained["depth"]), "--out", str(out), "--frame-size", "308"]) == 2
+    assert main(["export", str(trained["depth"]), "--out", str(out), "--which", "worst"]) == 2
+    assert not out.exists()
+    with pytest.raises(ConfigError, match="no such file"):
+        OnnxPolicy(tmp_path / "absent.onnx")
