@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 import onnx
 import pytest
 import torch
+from PIL import Image
 
 from depthq.cli import main
 from depthq.control.onnx_policy import OnnxPolicy
@@ -16,7 +18,8 @@ from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.collect import CollectConfig, collect
 from depthq.data.manifest import Dataset
 from depthq.deploy.onnx_export import FrameResize, export_onnx
-from depthq.errors import ConfigError
+from depthq.deploy.robot import LINEAR_SPEED, decode_frame, twist_for_frame
+from depthq.errors import ConfigError, DataError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.trunk import preprocess
 from depthq.train.config import TrainConfig
@@ -93,3 +96,17 @@ def test_export_cli_refuses_bad_input_and_writes_nothing(trained: dict[str, Path
     assert not out.exists()
     with pytest.raises(ConfigError, match="no such file"):
         OnnxPolicy(tmp_path / "absent.onnx")
+
+
+def test_robot_step_decodes_a_compressed_frame_and_steers(trained: dict[str, Path], tmp_path: Path) -> None:
+    path = export_onnx(trained["coll"], tmp_path / "onnx")
+    onnx_policy, torch_policy = OnnxPolicy(path), QNetPolicy.from_checkpoint(trained["coll"])
+    for frame in _val_frames(trained["data"])[:5]:
+        buffer = io.BytesIO()
+        Image.fromarray(frame).save(buffer, format="JPEG", quality=90)  # as a camera driver sends it
+        decoded = decode_frame(buffer.getvalue())
+        assert decoded.shape == frame.shape and np.abs(decoded.astype(int) - frame).mean() < 3
+        twist = twist_for_frame(onnx_policy, decoded)
+        assert twist.linear_x == LINEAR_SPEED and twist.angular_z == torch_policy.act({"image": decoded})
+    with pytest.raises(DataError, match="not a JPEG or PNG"):
+        decode_frame(b"\x00" * 100)
