@@ -9,7 +9,6 @@ from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
-from depthq.nets.trunk import DEFAULT_TRUNK
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
 from depthq.report.layout import model_name
@@ -35,6 +34,11 @@ def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
     return best
 
 
+def _trunks(out: Path) -> list[str]:
+    """The trunks the folder's checkpoints were trained with, as their config.json records them."""
+    return sorted({read_json(p)["trunk"] for p in (out / "models").glob("*/config.json")})
+
+
 def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> None:
     t1 = table1_rows(out, preset.subsets, preset.seeds)
     seeds = per_seed_rows(out, preset.subsets, preset.seeds)
@@ -44,8 +48,8 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     note = (
         f"mean (std) over the seeds evaluated so far (columns 'seeds'; the preset has {len(preset.seeds)}); "
         f"{preset.canyons} canyons, {preset.decision_hz:g} decisions/s, {preset.time_limit_s:.0f} s "
-        f"per run; success = more than 15 m from the spawn. Trunk: {DEFAULT_TRUNK} (frozen "
-        f"EfficientNet-Lite0, its last map in 4 image columns) instead of the paper's MobileNet-v1-0.25.\n"
+        f"per run; success = more than 15 m from the spawn. Trunk: {', '.join(_trunks(out)) or '–'} "
+        f"(see the deviations) instead of the paper's MobileNet-v1-0.25.\n"
     )
     atomic_write_bytes(
         out / "table1.md",
