@@ -19,14 +19,14 @@ def bench_policy(checkpoint: Path | None = None, decisions: int = 200) -> dict:
     depend on the weights, only on the trunk and the head's shape.
     """
     from depthq.nets.heads import HeadConfig, QNet, build_head
-    from depthq.nets.trunk import build_trunk
+    from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
     from depthq.sim.env import CanyonEnv
 
     torch.set_num_threads(cores())
     if checkpoint is not None:
         policy = QNetPolicy.from_checkpoint(Path(checkpoint))
     else:
-        trunk = build_trunk("efficientnet_lite0")
+        trunk = build_trunk(DEFAULT_TRUNK)
         policy = QNetPolicy(QNet(trunk, build_head(HeadConfig("depth", trunk.feature_dim))), "depth")
     env = CanyonEnv()
     obs, _ = env.reset(seed=0, options={"canyon": "eval:0"})

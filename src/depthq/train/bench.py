@@ -14,7 +14,7 @@ from depthq.data.manifest import Dataset
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import build_trunk
+from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.parallel import cores
 from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig
@@ -89,7 +89,7 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     }
 
 
-def bench_features(data: Path, n: int = 512, size: int = 128, trunk: str = "efficientnet_lite0") -> dict:
+def bench_features(data: Path, n: int = 512, size: int = 128, trunk: str = DEFAULT_TRUNK) -> dict:
     """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
     resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
     torch.set_num_threads(trunk_threads())
