@@ -100,4 +100,6 @@ def test_cli_refuses_a_missing_checkpoint_and_an_unknown_canyon_set(tmp_path, ca
     assert "nope" in capsys.readouterr().err
     assert main(["evaluate", "heuristic", "--canyons", "mars", "--out", str(tmp_path / "o")]) == 2
     assert "mars" in capsys.readouterr().err
+    assert main(["evaluate", "heuristic", "--device", "tpu", "--out", str(tmp_path / "o")]) == 2
+    assert "'tpu'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()

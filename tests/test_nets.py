@@ -14,6 +14,7 @@ import torch
 from torch import nn
 
 from depthq.errors import ConfigError
+from depthq.nets.device import resolve_device
 from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
 from depthq.nets.heads import CollHead, DepthHead, HeadConfig, QNet, build_head, probability
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
@@ -243,3 +244,14 @@ def test_column_features_keep_left_and_right():
         # ImageNet features are nearly mirror-invariant, so the mirrored image's columns, read right
         # to left, are close to the image's own; read left to right they differ.
         assert (columns - mirrored.flip(-1)).norm() < 0.75 * (columns - mirrored).norm()
+
+
+def test_devices_resolve_or_fail_by_name():
+    expected = "cuda" if torch.cuda.is_available() else "mps" if torch.backends.mps.is_available() else "cpu"
+    assert resolve_device("auto").type == expected and resolve_device("cpu") == torch.device("cpu")
+    for bad in ("tpu", "gpu0", "", "meta"):
+        with pytest.raises(ConfigError, match=f"--device {bad!r}"):
+            resolve_device(bad)
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="sees no CUDA GPU"):
+            resolve_device("cuda:0")

@@ -61,6 +61,8 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
 def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
     assert main(["reproduce", "--preset", "huge", "--out", str(tmp_path / "x")]) == 2
     assert "huge" in capsys.readouterr().err
+    assert main(["reproduce", "--preset", "smoke", "--device", "cuda:7", "--out", str(tmp_path / "x")]) == 2
+    assert "cuda:7" in capsys.readouterr().err  # no GPU here, or not 8 of them
     assert not (tmp_path / "x").exists()
     assert main(["reproduce", "--preset", "quick", "--out", str(smoke)]) == 2
     assert "smoke" in capsys.readouterr().err

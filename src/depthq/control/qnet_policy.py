@@ -31,15 +31,17 @@ class QNetPolicy:
         input_size: int = 128,
         name: str = "qnet",
         source: str | None = None,
+        device: torch.device | str = "cpu",
     ) -> None:
         if kind not in ("depth", "coll"):
             raise ConfigError(f"unknown Q-net kind {kind!r}; expected 'depth' or 'coll'")
         if not actions or any(not -1 <= a <= 1 for a in actions):
             raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
-        self.net = net.eval()
+        self.device = torch.device(device)
+        self.net = net.to(self.device).eval()
         self.kind = kind
         self.actions = np.asarray(actions, np.float64)
-        self._actions_t = torch.tensor(actions, dtype=torch.float32)
+        self._actions_t = torch.tensor(actions, dtype=torch.float32, device=self.device)
         self.input_size = input_size
         self.name = name
         self.source = source
@@ -47,7 +49,11 @@ class QNetPolicy:
 
     @classmethod
     def from_checkpoint(
-        cls, folder: Path, which: str = "best", actions: tuple[float, ...] = DEFAULT_ACTIONS
+        cls,
+        folder: Path,
+        which: str = "best",
+        actions: tuple[float, ...] = DEFAULT_ACTIONS,
+        device: torch.device | str = "cpu",
     ) -> QNetPolicy:
         net, config = load_qnet(Path(folder), which=which)
         kind = config["train"]["model"]
@@ -58,6 +64,7 @@ class QNetPolicy:
             input_size=int(config["train"]["input_size"]),
             name=f"{'DQN' if kind == 'depth' else 'CQN'}:{Path(folder).name}",
             source=str(folder),
+            device=device,
         )
 
     def reset(self, seed: int | None = None) -> None:
@@ -66,8 +73,8 @@ class QNetPolicy:
     @torch.inference_mode()
     def values(self, image: np.ndarray) -> np.ndarray:
         """Per-action predictions for one uint8 frame (H, W, 3)."""
-        out = self.net.q_values(preprocess(image, self.input_size), self._actions_t)
-        return (probability(out) if self.kind == "coll" else out).numpy()
+        out = self.net.q_values(preprocess(image, self.input_size).to(self.device), self._actions_t)
+        return (probability(out) if self.kind == "coll" else out).cpu().numpy()
 
     def act(self, obs: Observation) -> float:
         self.last_values = self.values(obs["image"])

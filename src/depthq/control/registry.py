@@ -13,9 +13,9 @@ from depthq.errors import ConfigError
 BUILTIN = ("heuristic", "ou")
 
 
-def make_policy(spec: str, seed: int | None = None, which: str = "best") -> Policy:
+def make_policy(spec: str, seed: int | None = None, which: str = "best", device: str = "cpu") -> Policy:
     """`spec` is 'heuristic', 'ou', the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
-    (`which` weights: 'best' validation or 'last') or 'onnx:PATH'."""
+    (`which` weights: 'best' validation or 'last'; run on torch `device`) or 'onnx:PATH'."""
     if spec == "heuristic":
         return DepthHeuristic()
     if spec == "ou":
@@ -28,7 +28,7 @@ def make_policy(spec: str, seed: int | None = None, which: str = "best") -> Poli
     if path.is_dir():
         from depthq.control.qnet_policy import QNetPolicy
 
-        return QNetPolicy.from_checkpoint(path, which=which)
+        return QNetPolicy.from_checkpoint(path, which=which, device=device)
     raise ConfigError(
         f"unknown policy {spec!r}: expected one of {BUILTIN}, an existing checkpoint folder or onnx:PATH"
     )

@@ -12,22 +12,25 @@ from depthq.control.qnet_policy import QNetPolicy
 from depthq.parallel import cores
 
 
-def bench_policy(checkpoint: Path | None = None, decisions: int = 200) -> dict:
+def bench_policy(checkpoint: Path | None = None, decisions: int = 200, device: str = "auto") -> dict:
     """Median and 90th-percentile ms per decision on real rendered frames.
 
     Without a checkpoint the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
     """
+    from depthq.nets.device import resolve_device
     from depthq.nets.heads import HeadConfig, QNet, build_head
     from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
     from depthq.sim.env import CanyonEnv
 
+    where = resolve_device(device)
     torch.set_num_threads(cores())
     if checkpoint is not None:
-        policy = QNetPolicy.from_checkpoint(Path(checkpoint))
+        policy = QNetPolicy.from_checkpoint(Path(checkpoint), device=where)
     else:
         trunk = build_trunk(DEFAULT_TRUNK)
-        policy = QNetPolicy(QNet(trunk, build_head(HeadConfig("depth", trunk.feature_dim))), "depth")
+        head = build_head(HeadConfig("depth", trunk.feature_dim))
+        policy = QNetPolicy(QNet(trunk, head), "depth", device=where)
     env = CanyonEnv()
     obs, _ = env.reset(seed=0, options={"canyon": "eval:0"})
     frames = []

@@ -147,7 +147,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> d
     }
 
 
-def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
+def _worker(policy_spec: str, config: EvalConfig, tasks, results, device: str = "cpu") -> None:
     import torch
 
     from depthq.control.heuristic import DepthHeuristic
@@ -155,7 +155,7 @@ def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
     from depthq.sim.env import CanyonEnv
 
     torch.set_num_threads(1)  # same float sums in every process: results independent of W
-    policy = make_policy(policy_spec, seed=config.seed, which=config.which)
+    policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
     env, expert = CanyonEnv(config.env), DepthHeuristic()
     try:
         while (task := tasks.get()) is not None:
@@ -169,14 +169,22 @@ def _worker(policy_spec: str, config: EvalConfig, tasks, results) -> None:
 
 
 def evaluate(
-    policy_spec: str, out: Path, config: EvalConfig = EvalConfig(), workers: int = 2, progress: bool = True
+    policy_spec: str,
+    out: Path,
+    config: EvalConfig = EvalConfig(),
+    workers: int = 2,
+    progress: bool = True,
+    device: str = "auto",
 ) -> dict[str, Any]:
-    """Evaluate `policy_spec` ('heuristic', 'ou' or a checkpoint folder) and write its files to `out`."""
+    """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
+    files to `out`; a Q-net runs on `device` (`depthq.nets.device`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     from depthq.control.registry import make_policy
+    from depthq.nets.device import resolve_device
 
-    description = make_policy(policy_spec, seed=config.seed, which=config.which).describe()  # fails early
+    where = str(resolve_device(device))
+    description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
     ctx = mp.get_context("spawn")
@@ -187,7 +195,7 @@ def evaluate(
     for _ in range(workers):
         tasks.put(None)
     procs = [
-        ctx.Process(target=_worker, args=(policy_spec, config, tasks, results), daemon=True)
+        ctx.Process(target=_worker, args=(policy_spec, config, tasks, results, where), daemon=True)
         for _ in range(workers)
     ]
     for p in procs:

@@ -42,8 +42,8 @@ def _eval_done(folder: Path) -> bool:
     return (folder / "summary.json").is_file()
 
 
-def build_stages(preset: Preset, out: Path) -> list[Stage]:
-    """The pipeline as an ordered list of resumable stages."""
+def build_stages(preset: Preset, out: Path, device: str = "cpu") -> list[Stage]:
+    """The pipeline as an ordered list of resumable stages; networks run on `device`."""
     from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
     from depthq.data.manifest import Dataset
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
@@ -74,7 +74,7 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
         Stage(
             "features",
             lambda: features_ready(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE),
-            lambda: load_features(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE),
+            lambda: load_features(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE, device=device),
         ),
     ]
     for ref in ("heuristic", "ou"):
@@ -106,14 +106,14 @@ def build_stages(preset: Preset, out: Path) -> list[Stage]:
                     Stage(
                         f"train {name}",
                         lambda c=config, f=ckpt: saved_epoch(f) >= c.epochs,
-                        lambda c=config, f=ckpt: train(c, f),
+                        lambda c=config, f=ckpt: train(c, f, device=device),
                     )
                 )
                 stages.append(
                     Stage(
                         f"evaluate {name}",
                         lambda f=ev: _eval_done(f),
-                        lambda f=ev, c=ckpt: evaluate(str(c), f, eval_config, preset.workers),
+                        lambda f=ev, c=ckpt: evaluate(str(c), f, eval_config, preset.workers, device=device),
                     )
                 )
     return stages
@@ -134,16 +134,18 @@ def _claim(out: Path, preset: Preset) -> None:
     write_json(marker, {"preset": to_dict(preset), "provenance": provenance()})
 
 
-def reproduce(preset_name: str, out: Path, progress: bool = True) -> dict[str, float]:
-    """Run (or resume) the whole pipeline; returns the measured seconds per stage."""
+def reproduce(preset_name: str, out: Path, progress: bool = True, device: str = "auto") -> dict[str, float]:
+    """Run (or resume) the whole pipeline, networks on `device`; returns the measured seconds per stage."""
+    from depthq.nets.device import resolve_device
     from depthq.report.build import build_report
 
+    where = str(resolve_device(device))  # a device torch cannot use fails here, before any work
     preset = get_preset(preset_name)
     out = Path(out)
     _claim(out, preset)
     times_path = out / "stages.json"
     times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
-    stages = build_stages(preset, out)
+    stages = build_stages(preset, out, where)
     with tqdm(
         total=len(stages),
         desc=f"reproduce {preset.name}",

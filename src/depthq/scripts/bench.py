@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from depthq.errors import ConfigError
+from depthq.nets.device import DEVICE_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -29,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     pol.add_argument("--decisions", type=int, default=200)
     for parser in (sim, col, feat, tr, pol):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
+    for parser in (feat, tr, pol):
+        parser.add_argument("--device", default="auto", help=DEVICE_HELP)
 
 
 def _positive(name: str, value: float) -> None:
@@ -63,7 +66,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--frames", args.frames)
         from depthq.train.bench import bench_features
 
-        r = bench_features(args.data, n=args.frames)
+        r = bench_features(args.data, n=args.frames, device=args.device)
         return (
             r,
             f"{r['frames_per_s']} frames/s ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)",
@@ -72,7 +75,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--seconds", args.seconds)
         from depthq.train.bench import bench_train
 
-        r = bench_train(args.seconds)
+        r = bench_train(args.seconds, device=args.device)
         return r, (
             f"{r['samples_per_s']} head samples/s, {r['head_gflops']} GFLOP/s = {r['ratio']} × matmul's "
             f"{r['matmul_gflops']} GFLOP/s"
@@ -80,7 +83,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     _positive("--decisions", args.decisions)
     from depthq.evaluate.bench import bench_policy
 
-    r = bench_policy(args.checkpoint, args.decisions)
+    r = bench_policy(args.checkpoint, args.decisions, device=args.device)
     return r, f"{r['ms_median']} ms median per decision ({r['ms_p90']} ms p90, {r['threads']} threads)"
 
 

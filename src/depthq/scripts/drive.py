@@ -9,12 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from depthq.errors import ConfigError
+from depthq.nets.device import DEVICE_HELP, resolve_device
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", default="heuristic", help="'heuristic', 'ou' or a checkpoint folder")
     p.add_argument("--canyon", default="eval:0", help="canyon id, e.g. eval:0 or train:12")
     p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--seed", type=int, default=0, help="sensor-noise and policy seed")
     p.add_argument("--time-limit", type=float, default=45.0, help="seconds before the run is cut")
     p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
@@ -32,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     canyon = parse_canyon(args.canyon)
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
-    policy = make_policy(args.policy, seed=args.seed)
+    policy = make_policy(args.policy, seed=args.seed, device=str(resolve_device(args.device)))
     world = WorldConfig() if args.hz is None else WorldConfig(decision_hz=args.hz)
     env = CanyonEnv(EnvConfig(world=world, time_limit_s=args.time_limit))
     try:

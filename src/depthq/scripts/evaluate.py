@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from depthq.nets.device import DEVICE_HELP
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="'heuristic', 'ou' or a checkpoint folder")
@@ -17,6 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="decisions per second [a checkpoint's: its training data's; else the calibrated default]",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--time-limit", type=float, default=45.0, help="seconds per run")
     p.add_argument("--which", default="best", help="checkpoint weights: best or last")
@@ -34,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
         which=args.which,
         decision_hz=args.hz,
     )
-    result = evaluate(args.policy, args.out, config, workers=args.workers)
+    result = evaluate(args.policy, args.out, config, workers=args.workers, device=args.device)
     s = result["summary"]
     if args.json:
         print(json.dumps({"policy": result["policy"]["policy"], **s, "seconds": result["seconds"]}))

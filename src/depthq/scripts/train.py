@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.nets.device import DEVICE_HELP
 from depthq.nets.trunk import DEFAULT_TRUNK
 from depthq.train.config import DEFAULT_EPOCHS
 
@@ -15,6 +16,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=None, help="train on the first N usable runs (default: all)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, required=True, help="checkpoint folder (created, or resumed)")
+    p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--epochs", type=int, default=DEFAULT_EPOCHS,
                    help=f"epochs of 100 training + 10 validation batches (default {DEFAULT_EPOCHS})")
     p.add_argument("--trunk", default=DEFAULT_TRUNK,
@@ -39,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     config = TrainConfig(model=args.model, data=str(args.data), runs=args.runs, seed=args.seed,
                          epochs=args.epochs, trunk=args.trunk, lr=args.lr, dropout=args.dropout,
                          depth_loss=args.depth_loss, action_lag=args.action_lag)
-    out = train(config, args.out, progress=not args.no_progress)
+    out = train(config, args.out, progress=not args.no_progress, device=args.device)
     best, last = read_json(out / "best.json"), read_json(out / "last.json")
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "
           f"last.safetensors: epoch {last['epoch']})")

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from depthq.data.manifest import Dataset
+from depthq.nets.device import resolve_device
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
@@ -27,19 +28,20 @@ BATCH = 64
 POOL = 8192  # cached-feature-like rows to draw batches from
 
 
-def bench_train(seconds: float = 10.0) -> dict[str, float]:
+def bench_train(seconds: float = 10.0, device: str = "auto") -> dict[str, float]:
     """Depth-Q-Net head training samples/s (batch 64, 1280-d features, 4096 hidden, Adadelta) and its
     FLOP/s as a fraction of what `torch.matmul` reaches on the head's largest GEMM in the same run.
 
     Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); the hidden layer's input
     gradient is never computed (features need none), so `ratio_actual` counts the work really done.
     """
+    where = resolve_device(device)
     torch.set_num_threads(cores())
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
     config = TrainConfig(model="depth", data="-")
     head = head_config(config)
-    model = QNet(build_trunk(config.trunk, pretrained=False), build_head(head))
+    model = QNet(build_trunk(config.trunk, pretrained=False), build_head(head)).to(where)
     optimizer = make_optimizer(model, config.learning_rate, config.weight_decay)
     rng = np.random.default_rng(0)
     arrays = {
@@ -51,14 +53,15 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     }
     features = rng.uniform(0, 6, (POOL, head.feature_dim)).astype(np.float16)
     samples = FeatureSamples(arrays, FeatureTable(features, {"train_000000": (0, POOL)}, False), "train")
-    x = torch.rand(BATCH, head.feature_dim + 1)
-    w = torch.rand(head.feature_dim + 1, head.hidden)
+    x = torch.rand(BATCH, head.feature_dim + 1, device=where)
+    w = torch.rand(head.feature_dim + 1, head.hidden, device=where)
 
     def head_steps() -> None:
-        train_step(model, samples, samples.batch(samples.draw(BATCH, rng)), depth_l1_loss, optimizer)
+        batch = samples.batch(samples.draw(BATCH, rng)).to(where)
+        train_step(model, samples, batch, depth_l1_loss, optimizer)  # its loss.item() waits for the device
 
     def matmul() -> None:
-        torch.matmul(x, w)
+        torch.matmul(x, w).sum().item()  # .item(): wait for the device, as a training step does
 
     model.train()
     head_s = matmul_s = 0.0
@@ -78,6 +81,7 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     samples_per_s = head_n * BATCH / head_s
     matmul_flops = matmul_n * 2 * BATCH * d * h / matmul_s
     return {
+        "device": str(where),
         "threads": torch.get_num_threads(),
         "samples_per_s": round(samples_per_s, 1),
         "steps_per_s": round(head_n / head_s, 2),
@@ -89,22 +93,26 @@ def bench_train(seconds: float = 10.0) -> dict[str, float]:
     }
 
 
-def bench_features(data: Path, n: int = 512, size: int = 128, trunk: str = DEFAULT_TRUNK) -> dict:
+def bench_features(
+    data: Path, n: int = 512, size: int = 128, trunk: str = DEFAULT_TRUNK, device: str = "auto"
+) -> dict:
     """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
     resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
     torch.set_num_threads(trunk_threads())
     dataset = Dataset.open(Path(data))
-    net = build_trunk(trunk)
+    where = resolve_device(device)
+    net = build_trunk(trunk).to(where)
     frames = 0
     with torch.inference_mode():
-        net(torch.rand(16, 3, size, size))  # warm-up
+        net(torch.rand(16, 3, size, size, device=where)).cpu()  # warm-up
         start = time.perf_counter()
         for batch in prefetch(itertools.islice(frame_batches(dataset, size), -(-n // DECODE_BATCH)), depth=2):
-            net(batch)
+            net(batch.to(where)).cpu()  # to the cache's memory, as `compute_features` does
             frames += len(batch)
         seconds = time.perf_counter() - start
-    return {"trunk": trunk, "input_size": size, "frames": frames, "seconds": round(seconds, 2),
-            "frames_per_s": round(frames / seconds, 1), "threads": torch.get_num_threads()}
+    return {"trunk": trunk, "device": str(where), "input_size": size, "frames": frames,
+            "seconds": round(seconds, 2), "frames_per_s": round(frames / seconds, 1),
+            "threads": torch.get_num_threads()}
 
 
 def _timed(fn, seconds: float) -> tuple[int, float]:

@@ -77,7 +77,9 @@ def build_qnet(config: TrainConfig) -> QNet:
 def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
     """The weights a checkpoint stores, named "<part>.<parameter>"."""
     parts = stored_parts(model)
-    return {f"{name}.{k}": t.detach().contiguous() for name, m in parts for k, t in m.state_dict().items()}
+    return {
+        f"{name}.{k}": t.detach().cpu().contiguous() for name, m in parts for k, t in m.state_dict().items()
+    }
 
 
 # --- starting and resuming -------------------------------------------------------------------------
@@ -146,7 +148,8 @@ def save_epoch(
     optim = optimizer.state_dict()
     tensors = {f"model.{k}": v for k, v in weights.items()}
     for param, values in optim["state"].items():
-        tensors.update({f"optim.{param}.{key}": torch.as_tensor(v).clone() for key, v in values.items()})
+        for key, v in values.items():
+            tensors[f"optim.{param}.{key}"] = torch.as_tensor(v).detach().cpu().clone()
     tensors["rng.torch"] = torch.get_rng_state()
     meta = {
         "epoch": state.epoch,

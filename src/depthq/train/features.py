@@ -80,8 +80,10 @@ class FeatureTable:
         return torch.from_numpy(self.features[self.rows(split, arrays["run_id"], arrays["frame_id"])])
 
 
-def load_features(dataset: Dataset, trunk: str, size: int, progress: bool = True) -> FeatureTable:
-    """The cached features of `dataset`, computed first if missing or stale."""
+def load_features(
+    dataset: Dataset, trunk: str, size: int, progress: bool = True, device: torch.device | str = "cpu"
+) -> FeatureTable:
+    """The cached features of `dataset`, computed first (on `device`) if missing or stale."""
     folder = cache_dir(dataset.root, trunk, size)
     expected = _index(dataset, trunk, size)
     table = _read(folder, expected)
@@ -90,7 +92,7 @@ def load_features(dataset: Dataset, trunk: str, size: int, progress: bool = True
     net = build_trunk(trunk)
     if not net.frozen:
         raise ConfigError(f"trunk {trunk!r} is trained with the head: no feature cache")
-    compute_features(dataset, net, size, folder, expected, progress)
+    compute_features(dataset, net.to(device), size, folder, expected, progress)
     table = _read(folder, expected)
     if table is None:
         raise DataError(f"{folder}: feature cache just written does not read back")
@@ -117,6 +119,7 @@ def compute_features(
     n_frames = sum(n for _, n in index["runs"].values())
     tmp = folder / f".{ARRAY}.{os.getpid()}.tmp"
     torch.set_num_threads(trunk_threads())
+    device = next(trunk.parameters()).device
     start = time.perf_counter()
     try:
         out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16, shape=(n_frames, trunk.feature_dim))
@@ -124,7 +127,7 @@ def compute_features(
         row = 0
         with torch.inference_mode():
             for batch in prefetch(frame_batches(dataset, size), depth=2):
-                out[row : row + len(batch)] = trunk(batch).numpy()
+                out[row : row + len(batch)] = trunk(batch.to(device)).cpu().numpy()
                 row += len(batch)
                 bar.update(len(batch))
         bar.close()

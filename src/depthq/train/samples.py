@@ -30,6 +30,10 @@ class Batch:
     actions: torch.Tensor
     targets: torch.Tensor
 
+    def to(self, device: torch.device) -> Batch:
+        """The batch on `device` (a no-op on the CPU, where samples live)."""
+        return Batch(self.inputs.to(device), self.actions.to(device), self.targets.to(device))
+
 
 class Samples(ABC):
     """The samples of a view; `draw` picks batch indices, `batch` builds one, `predict` runs the model."""

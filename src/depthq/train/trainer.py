@@ -19,6 +19,7 @@ from tqdm import tqdm
 from depthq.data.manifest import Dataset
 from depthq.data.views import CollView, DepthView, view_arrays
 from depthq.errors import ConfigError
+from depthq.nets.device import resolve_device
 from depthq.nets.heads import QNet
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.optim import make_optimizer
@@ -36,19 +37,21 @@ class DivergedError(ConfigError):
     """The loss became NaN or infinite; the usual cause is a learning rate too large (CLI exit 2)."""
 
 
-def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
+def train(config: TrainConfig, out: Path, progress: bool = True, device: str = "auto") -> Path:
     """Train `config` into the folder `out` (layout: `depthq.train.checkpoint`) and return it.
 
-    A folder holding this training resumes from its last epoch, bit for bit as if never stopped;
-    a finished one is returned as is; one holding another training is a ConfigError.
+    A folder holding this training resumes from its last epoch, bit for bit as if never stopped (on
+    the CPU; a GPU's kernels need not be deterministic); a finished one is returned as is; one
+    holding another training is a ConfigError. `device`: see `depthq.nets.device`.
     """
     out = Path(out)
+    where = resolve_device(device)
     dataset = Dataset.open(Path(config.data))
     fingerprint = dataset_fingerprint(dataset)
     resuming = checkpoint.check_folder(out, config, fingerprint)
     if resuming and checkpoint.saved_epoch(out) >= config.epochs:
         return out
-    train_set, val_set = _samples(config, dataset, progress)
+    train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
     checkpoint.write_config(out, config, fingerprint)
 
@@ -57,7 +60,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
     torch.manual_seed(config.seed)  # head initialisation and dropout
-    model = checkpoint.build_qnet(config)
+    model = checkpoint.build_qnet(config).to(where)
     c = config
     optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
     loss_fn = loss_function(config)
@@ -75,7 +78,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
             model.train()
             train_losses = []
             for _ in range(config.train_batches):
-                batch = train_set.batch(train_set.draw(config.batch_size, rng))
+                batch = train_set.batch(train_set.draw(config.batch_size, rng)).to(where)
                 train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer))
                 _check_finite(train_losses[-1], "training", epoch, out, state)
 
@@ -83,7 +86,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True) -> Path:
             val_losses, val_stds = [], []
             with torch.no_grad():
                 for idx in val_batches:
-                    batch = val_set.batch(idx)
+                    batch = val_set.batch(idx).to(where)
                     loss, per_sample = loss_fn(val_set.predict(model, batch), batch.targets)
                     val_losses.append(loss.item())
                     val_stds.append(per_sample.std().item())
@@ -125,14 +128,16 @@ def train_step(model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, opt
     return value
 
 
-def _samples(config: TrainConfig, dataset: Dataset, progress: bool) -> tuple[Samples, Samples]:
+def _samples(
+    config: TrainConfig, dataset: Dataset, progress: bool, device: torch.device
+) -> tuple[Samples, Samples]:
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
     data = config.labels()
     if TRUNKS[config.trunk].frozen:
         arrays = {split: view_arrays(dataset, split, n, config.model, data)
                   for split, n in (("train", config.runs), ("val", None))}
         _check_labels(config, arrays["train"]["target"])
-        table = load_features(dataset, config.trunk, config.input_size, progress)
+        table = load_features(dataset, config.trunk, config.input_size, progress, device)
         return FeatureSamples(arrays["train"], table, "train"), FeatureSamples(arrays["val"], table, "val")
     view = DepthView if config.model == "depth" else CollView
     train_view = view(dataset, "train", config.runs, data)
