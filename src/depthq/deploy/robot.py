@@ -28,7 +28,7 @@ def decode_frame(data: bytes) -> np.ndarray:
     """A `sensor_msgs/CompressedImage` payload (JPEG or PNG) → uint8 RGB (H, W, 3)."""
     try:
         with Image.open(io.BytesIO(data)) as image:
-            return np.asarray(image.convert("RGB"), dtype=np.uint8)
+            return np.array(image.convert("RGB"), dtype=np.uint8)  # a writable copy, as torch wants
     except (UnidentifiedImageError, OSError) as err:
         raise DataError(f"camera frame: not a JPEG or PNG image ({len(data)} bytes: {err})") from err
 
