@@ -34,3 +34,10 @@ def select_depth_action(pred_bins: np.ndarray, actions: np.ndarray) -> float:
 
 def select_coll_action(collision_prob: np.ndarray, actions: np.ndarray) -> float:
     return pick_best(np.asarray(collision_prob), np.asarray(actions), maximise=False)
+
+
+def select_action(kind: str, values: np.ndarray, actions: np.ndarray) -> float:
+    """The rule of a Q-net of `kind`: 'depth' (predicted bins per action) or 'coll' (probabilities)."""
+    if kind == "depth":
+        return select_depth_action(values, actions)
+    return select_coll_action(values, actions)

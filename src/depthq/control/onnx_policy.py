@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from depthq.control.action_selection import select_coll_action, select_depth_action
+from depthq.control.action_selection import select_action
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError, DataError
 
@@ -61,9 +61,7 @@ class OnnxPolicy:
 
     def act(self, obs: Observation) -> float:
         self.last_values = self.values(obs["image"])
-        if self.kind == "depth":
-            return select_depth_action(self.last_values, self.actions)
-        return select_coll_action(self.last_values, self.actions)
+        return select_action(self.kind, self.last_values, self.actions)
 
     def describe(self) -> dict[str, Any]:
         actions = self.actions.tolist()

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.control.action_selection import select_coll_action, select_depth_action
+from depthq.control.action_selection import select_action
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet
@@ -78,9 +78,7 @@ class QNetPolicy:
 
     def act(self, obs: Observation) -> float:
         self.last_values = self.values(obs["image"])
-        if self.kind == "depth":
-            return select_depth_action(self.last_values, self.actions)
-        return select_coll_action(self.last_values, self.actions)
+        return select_action(self.kind, self.last_values, self.actions)
 
     def describe(self) -> dict[str, Any]:
         return {

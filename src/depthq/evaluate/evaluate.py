@@ -184,6 +184,7 @@ def evaluate(
     from depthq.nets.device import resolve_device
 
     where = str(resolve_device(device))
+    # a bad spec fails here, before any worker starts
     description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
