@@ -21,6 +21,7 @@ VERBS: dict[str, str] = {
     "reproduce": "reproduce",
     "probe": "probe",
     "export": "export",
+    "bag": "bag",
 }
 
 

@@ -17,8 +17,10 @@ manifest.json:
         split, index            "train" | "val", position in that split (the file name says both)
         file                    path relative to DIR, e.g. "runs/train_000123.h5"
         n_frames, end_reason    frame count; "bump" | "contact" (collisions) | "time_limit" | "step_limit"
+                                | "stop" (a run imported from a bag: the robot stood or the frames stopped)
         canyon_split, canyon_index, canyon_seed, policy_seed
                                 the canyon the run drove in and the exploration policy's seed
+                                ("recorded", its position in the bag, 0, 0 for an imported run)
         sha256, bytes           the file's hash and size, checked before the file is read as data
 
 A run exists once its row is in the manifest: a file without a row (a crash between the two

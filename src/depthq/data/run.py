@@ -14,9 +14,11 @@ import numpy as np
 from depthq.sim.sensors import N_RAYS
 
 SPLITS = ("train", "val")
-CANYON_SPLITS = ("train", "val", "eval")  # the canyon streams of depthq.sim.canyon
+# the canyon streams of depthq.sim.canyon, and "recorded": a run imported from a robot's bag
+CANYON_SPLITS = ("train", "val", "eval", "recorded")
 COLLISION_END_REASONS = ("bump", "contact")
-END_REASONS = (*COLLISION_END_REASONS, "time_limit", "step_limit")
+# "stop": an imported run ended where the robot stood still or the recording broke off
+END_REASONS = (*COLLISION_END_REASONS, "time_limit", "step_limit", "stop")
 
 
 @dataclass(frozen=True)

@@ -159,14 +159,16 @@ class RunReader:
 
     def image(self, t: int) -> np.ndarray:
         """Frame t as uint8 (H, W, 3)."""
+        return self._decode(self.jpeg(t), t)
+
+    def jpeg(self, t: int) -> bytes:
+        """Frame t's JPEG bytes as stored (a bag export passes them on without re-encoding)."""
         if not 0 <= t < self.meta.n_frames:
             raise IndexError(f"{self.path}: frame {t} out of range 0..{self.meta.n_frames - 1}")
-        start, end = int(self._offsets[t]), int(self._offsets[t + 1])
         try:
-            data = self._jpeg[start:end].tobytes()
+            return self._jpeg[int(self._offsets[t]) : int(self._offsets[t + 1])].tobytes()
         except (OSError, ValueError) as err:
             raise DataError(f"{self.path}: cannot read frame {t} ({err})") from err
-        return self._decode(data, t)
 
     def run(self, images: bool = True) -> Run:
         """The whole run; `images=False` skips the JPEG data (labels and statistics need none)."""

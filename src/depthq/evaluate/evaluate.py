@@ -65,14 +65,16 @@ class EvalConfig:
 
 
 def data_rate(policy_spec: str) -> float:
-    """The decision rate of a checkpoint's training data; the default rate for any other policy."""
+    """The decision rate of a checkpoint's simulated training data; the default rate for any other policy
+    and for data imported from a robot."""
     from depthq.data.manifest import Dataset
     from depthq.nets.checkpoint import read_config
 
     if not Path(policy_spec).is_dir():
         return DEFAULT_DECISION_HZ
     data = Path(read_config(Path(policy_spec))["train"]["data"])
-    return float(Dataset.open(data).config["env"]["world"]["decision_hz"])
+    world = Dataset.open(data).config.get("env", {}).get("world", {})  # none in a robot's recording
+    return float(world.get("decision_hz", DEFAULT_DECISION_HZ))
 
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:
