@@ -3,3 +3,16 @@
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+def assert_video(path, n_frames: int, fps: float) -> None:
+    """A playable H.264 MP4 of the first canyon: one 1280×400 frame per decision, not blank, moving."""
+    import imageio_ffmpeg
+    import numpy as np
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = next(reader)
+    assert meta["codec"] == "h264" and meta["size"] == (1280, 400) and meta["fps"] == fps
+    frames = [np.frombuffer(f, np.uint8).reshape(400, 1280, 3) for f in reader]
+    assert len(frames) == n_frames
+    assert frames[0].std() > 20 and np.abs(frames[-1].astype(int) - frames[0]).mean() > 0.5

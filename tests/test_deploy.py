@@ -10,6 +10,7 @@ import numpy as np
 import onnx
 import pytest
 import torch
+from conftest import assert_video
 from PIL import Image
 
 from depthq.cli import main
@@ -86,6 +87,12 @@ def test_onnx_policy_drives_as_the_checkpoint(trained: dict[str, Path], tmp_path
             rows[name] = [(r["canyon"], r["distance"], r["steps"], r["end_reason"])
                           for r in csv.DictReader(f)]
     assert rows["onnx"] == rows["torch"]
+
+
+def test_evaluation_video_shows_the_collision_probabilities(trained: dict[str, Path], tmp_path: Path) -> None:
+    config = EvalConfig(canyons=parse_canyon_set("val:1000"), time_limit_s=4.0)
+    result = evaluate(str(trained["coll"]), tmp_path, config, workers=1, progress=False)
+    assert_video(tmp_path / "video.mp4", result["runs"][0]["steps"], config.env.world.decision_hz)
 
 
 def test_export_cli_refuses_bad_input_and_writes_nothing(trained: dict[str, Path], tmp_path: Path) -> None:

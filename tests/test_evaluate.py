@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import assert_video
 
 from depthq.cli import main
 from depthq.control.action_selection import depth_scores, select_coll_action, select_depth_action
@@ -79,6 +80,8 @@ def test_heuristic_evaluation_gives_sane_metrics_and_files(heuristic_eval):
     with np.load(out / "trajectories.npz", allow_pickle=False) as z:
         assert z["eval_0_poses"].shape == (steps + 1, 3)
     assert (out / "trajectories.png").stat().st_size > 1000
+    assert_video(out / "video.mp4", steps, DEFAULT_DECISION_HZ)
+
 
 
 def without_timing(runs: list[dict]) -> list[dict]:

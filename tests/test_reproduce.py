@@ -39,9 +39,11 @@ def test_tables_hold_numbers_for_both_networks(smoke):
 def test_report_is_self_contained_and_references_only_existing_files(smoke):
     html = (smoke / "report.html").read_text()
     for ref in re.findall(r'(?:src|href)="([^"]+)"', html):
-        assert ref.startswith("data:image/png;base64,") or (smoke / ref).is_file(), ref
+        inline = ref.startswith(("data:image/png;base64,", "data:video/mp4;base64,"))
+        assert inline or (smoke / ref).is_file(), ref
     assert html.count("data:image/png;base64,") >= 4
-    for name in ("fig4_qualitative.png", "fig5_convergence.png", "success_vs_runs.png"):
+    assert html.count("data:video/mp4;base64,") == 1  # Fig. 4 animated
+    for name in ("fig4_qualitative.png", "fig5_convergence.png", "success_vs_runs.png", "fig4_video.mp4"):
         assert (smoke / name).stat().st_size > 5000
 
 

@@ -100,13 +100,17 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
     return tuple(str(CanyonId(stream, i)) for i in indices)
 
 
-def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> dict[str, Any]:
-    """One run: the policy drives, the expert is asked on the same observations."""
+def drive(
+    policy, env, expert, canyon: str, seed: int, keep_every: int = 0, video: bool = False
+) -> dict[str, Any]:
+    """One run: the policy drives, the expert is asked on the same observations. `keep_every` keeps
+    Fig. 4 snapshots; `video` keeps every decision (the camera frame at half size) for the MP4."""
+    from depthq.evaluate.video import VIDEO_SCALE
     from depthq.sim.env import parse_canyon
 
     obs, info = env.reset(seed=seed, options={"canyon": parse_canyon(canyon)})
     policy.reset(seed)
-    poses, actions, expert_actions, ms, snaps = [info["pose"]], [], [], [], []
+    poses, actions, expert_actions, ms, snaps, frames = [info["pose"]], [], [], [], [], []
     done, step = False, 0
     while not done:
         expert_actions.append(expert.act(obs))
@@ -122,6 +126,16 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> d
                     "step": step,
                     "image": before["image"].copy(),
                     "values": values.copy(),
+                    "true_bins": obs["bins"].copy(),
+                    "pose": poses[-1].copy(),
+                    "action": action,
+                }
+            )
+        if video:
+            frames.append(
+                {
+                    "image": before["image"][::VIDEO_SCALE, ::VIDEO_SCALE].copy(),
+                    "values": None if values is None else values.copy(),
                     "true_bins": obs["bins"].copy(),
                     "pose": poses[-1].copy(),
                     "action": action,
@@ -146,6 +160,7 @@ def drive(policy, env, expert, canyon: str, seed: int, keep_every: int = 0) -> d
         "poses": poses.astype(np.float32),
         "actions": np.asarray(actions, np.float32),
         "snapshots": [snaps[i] for i in shown],
+        "video": frames,
     }
 
 
@@ -164,7 +179,7 @@ def _worker(policy_spec: str, config: EvalConfig, tasks, results, device: str = 
             k, canyon = task
             keep = FIG4_EVERY if k == 0 else 0
             results.put(
-                (k, drive(policy, env, expert, canyon, config.seed + int(canyon.split(":")[1]), keep))
+                (k, drive(policy, env, expert, canyon, config.seed + int(canyon.split(":")[1]), keep, k == 0))
             )
     finally:
         env.close()
@@ -177,9 +192,11 @@ def evaluate(
     workers: int = 2,
     progress: bool = True,
     device: str = "auto",
+    video: bool = True,
 ) -> dict[str, Any]:
     """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
-    files to `out`; a Q-net runs on `device` (`depthq.nets.device`)."""
+    files to `out`; a Q-net runs on `device` (`depthq.nets.device`). `video`: the first canyon as
+    video.mp4 (`depthq.evaluate.video`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     from depthq.control.registry import make_policy
@@ -238,13 +255,16 @@ def evaluate(
         "runs": [{f: r[f] for f in RUN_FIELDS} for r in ordered],
         "seconds": round(time.perf_counter() - start, 2),
     }
-    _write(out, summary, ordered)
+    _write(out, summary, ordered, video_fps=config.env.world.decision_hz if video else None)
     return summary
 
 
-def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]]) -> None:
+def _write(
+    out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float | None = None
+) -> None:
     """summary.json last: a folder with a summary is complete."""
     from depthq.evaluate.figures import plot_fig4, plot_trajectories
+    from depthq.evaluate.video import write_video
 
     out.mkdir(parents=True, exist_ok=True)
     text = io.StringIO()
@@ -263,4 +283,6 @@ def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]]) -> No
     snaps = runs[0]["snapshots"]
     if snaps:
         plot_fig4(snaps, runs[0], summary["policy"], out / "fig4_qualitative.png")
+    if video_fps is not None and runs[0]["video"]:
+        write_video(runs[0]["video"], runs[0], summary["policy"], out / "video.mp4", video_fps)
     write_json(out / "summary.json", summary)

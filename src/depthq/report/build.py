@@ -64,8 +64,9 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     plot_fig5(out, preset.subsets, preset.seeds, out / "fig5_convergence.png")
     plot_success_vs_runs(out, preset.subsets, preset.seeds, out / "success_vs_runs.png")
     best = _best_depth_eval(out, preset)
-    if best is not None and (best / "fig4_qualitative.png").is_file():
-        shutil.copyfile(best / "fig4_qualitative.png", out / "fig4_qualitative.png")
+    for name, copy in (("fig4_qualitative.png", "fig4_qualitative.png"), ("video.mp4", "fig4_video.mp4")):
+        if best is not None and (best / name).is_file():
+            shutil.copyfile(best / name, out / copy)
     figures = [
         (out / "eval" / name / "trajectories.png", f"trajectories: {name}") for name in ("heuristic", "ou")
     ]
@@ -81,7 +82,15 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
             ),
             ("Success rate against training runs", page.img(out / "success_vs_runs.png", "success vs runs")),
             ("Table II", page.table(t2)),
-            ("Fig. 4: Depth-Q-Net predictions", page.img(out / "fig4_qualitative.png", "Fig. 4")),
+            (
+                "Fig. 4: Depth-Q-Net predictions",
+                page.img(out / "fig4_qualitative.png", "Fig. 4")
+                + page.video(
+                    out / "fig4_video.mp4",
+                    f"Fig. 4 animated: {best.name if best else ''} in the first canyon, one frame per "
+                    "decision, real time",
+                ),
+            ),
             ("Fig. 5: convergence", page.img(out / "fig5_convergence.png", "Fig. 5")),
             ("Trajectories", "".join(page.img(p, alt) for p, alt in figures)),
             (

@@ -84,6 +84,17 @@ def img(path: Path, alt: str) -> str:
     )
 
 
+def video(path: Path, alt: str) -> str:
+    """An MP4 inlined like the figures (H.264 plays in every current browser)."""
+    if not path.is_file():
+        return f"<p><em>{html.escape(alt)}: not produced</em></p>"
+    data = base64.b64encode(path.read_bytes()).decode()
+    return (
+        f'<figure><video controls muted loop preload="auto" title="{html.escape(alt)}" '
+        f'src="data:video/mp4;base64,{data}"></video><figcaption>{html.escape(alt)}</figcaption></figure>'
+    )
+
+
 def table(rows: list[dict[str, str]]) -> str:
     if not rows:
         return "<p><em>no rows</em></p>"
@@ -99,7 +110,7 @@ def render(title: str, sections: list[tuple[str, str]]) -> str:
         "body{font-family:sans-serif;max-width:1200px;margin:2em auto;color:#222}"
         "table{border-collapse:collapse;margin:1em 0;font-size:13px}"
         "td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}th{background:#eee}"
-        "img{max-width:100%}figcaption{font-size:12px;color:#555}pre{background:#f6f6f6;padding:8px;"
+        "img,video{max-width:100%}figcaption{font-size:12px;color:#555}pre{background:#f6f6f6;padding:8px;"
         "font-size:12px;overflow:auto}"
     )
     body = "".join(f"<h2>{html.escape(h)}</h2>{content}" for h, content in sections)

@@ -10,7 +10,7 @@ from depthq.nets.device import DEVICE_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("policy", help="'heuristic', 'ou' or a checkpoint folder")
+    p.add_argument("policy", help="'heuristic', 'ou', a checkpoint folder or 'onnx:PATH'")
     p.add_argument(
         "--canyons", default="eval", help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
     )
@@ -25,6 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--which", default="best", help="checkpoint weights: best or last")
     p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+    p.add_argument("--no-video", action="store_true", help="skip video.mp4 of the first canyon")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,7 +38,9 @@ def run(args: argparse.Namespace) -> int:
         which=args.which,
         decision_hz=args.hz,
     )
-    result = evaluate(args.policy, args.out, config, workers=args.workers, device=args.device)
+    result = evaluate(
+        args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video
+    )
     s = result["summary"]
     if args.json:
         print(json.dumps({"policy": result["policy"]["policy"], **s, "seconds": result["seconds"]}))
