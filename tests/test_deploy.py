@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,17 @@ def test_onnx_policy_drives_as_the_checkpoint(trained: dict[str, Path], tmp_path
             rows[name] = [(r["canyon"], r["distance"], r["steps"], r["end_reason"])
                           for r in csv.DictReader(f)]
     assert rows["onnx"] == rows["torch"]
+
+
+def test_bench_times_torch_and_onnx_on_the_same_frames(
+    trained: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = export_onnx(trained["depth"], tmp_path / "onnx")
+    spec = ["--policy", str(trained["depth"]), "--policy", f"onnx:{path}"]
+    assert main(["bench", "policy", *spec, "--decisions", "5", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [p["policy"] for p in result["policies"]] == [f"DQN:{trained['depth'].name}", f"ONNX:{path.stem}"]
+    assert all(0 < p["ms_median"] <= p["ms_p90"] for p in result["policies"])
 
 
 def test_evaluation_video_shows_the_collision_probabilities(trained: dict[str, Path], tmp_path: Path) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -12,25 +11,27 @@ from depthq.control.qnet_policy import QNetPolicy
 from depthq.parallel import cores
 
 
-def bench_policy(checkpoint: Path | None = None, decisions: int = 200, device: str = "auto") -> dict:
-    """Median and 90th-percentile ms per decision on real rendered frames.
+def bench_policy(specs: list[str] | None = None, decisions: int = 200, device: str = "auto") -> dict:
+    """Median and 90th-percentile ms per decision on real rendered frames, for each policy in `specs`
+    (checkpoint folders or 'onnx:PATH'), taken in turns on the same frames so they compare fairly.
 
-    Without a checkpoint the policy gets a freshly initialised Depth-Q-Net head: the latency does not
+    Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
     """
+    from depthq.control.registry import make_policy
     from depthq.nets.device import resolve_device
     from depthq.nets.heads import HeadConfig, QNet, build_head
     from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
     from depthq.sim.env import CanyonEnv
 
-    where = resolve_device(device)
+    where = str(resolve_device(device))
     torch.set_num_threads(cores())
-    if checkpoint is not None:
-        policy = QNetPolicy.from_checkpoint(Path(checkpoint), device=where)
+    if specs:
+        policies = [make_policy(spec, device=where) for spec in specs]
     else:
         trunk = build_trunk(DEFAULT_TRUNK)
         head = build_head(HeadConfig("depth", trunk.feature_dim))
-        policy = QNetPolicy(QNet(trunk, head), "depth", device=where)
+        policies = [QNetPolicy(QNet(trunk, head), "depth", device=where)]
     env = CanyonEnv()
     obs, _ = env.reset(seed=0, options={"canyon": "eval:0"})
     frames = []
@@ -38,17 +39,24 @@ def bench_policy(checkpoint: Path | None = None, decisions: int = 200, device: s
         frames.append(obs)
         obs, *_ = env.step(np.zeros(1, np.float32))
     env.close()
-    for obs in frames[:5]:  # warm-up
-        policy.act(obs)
-    times = []
+    for policy in policies:
+        for obs in frames[:5]:  # warm-up
+            policy.act(obs)
+    times = [[] for _ in policies]
     for k in range(decisions):
-        start = time.perf_counter()
-        policy.act(frames[k % len(frames)])
-        times.append((time.perf_counter() - start) * 1e3)
+        for policy, ms in zip(policies, times, strict=True):
+            start = time.perf_counter()
+            policy.act(frames[k % len(frames)])
+            ms.append((time.perf_counter() - start) * 1e3)
     return {
-        "policy": policy.name,
         "threads": torch.get_num_threads(),
         "decisions": decisions,
-        "ms_median": round(float(np.median(times)), 2),
-        "ms_p90": round(float(np.percentile(times, 90)), 2),
+        "policies": [
+            {
+                "policy": policy.name,
+                "ms_median": round(float(np.median(ms)), 2),
+                "ms_p90": round(float(np.percentile(ms, 90)), 2),
+            }
+            for policy, ms in zip(policies, times, strict=True)
+        ],
     }

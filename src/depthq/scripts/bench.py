@@ -26,7 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     tr = sub.add_parser("train", help="head training samples/s and its ratio to matmul FLOP/s (≥ 0.6)")
     tr.add_argument("--seconds", type=float, default=10.0)
     pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
-    pol.add_argument("--checkpoint", type=Path, default=None, help="a checkpoint folder (optional)")
+    pol.add_argument(
+        "--policy", action="append", default=None,
+        help="a checkpoint folder or onnx:PATH; repeat to compare (default: an untrained Depth-Q-Net)",
+    )
     pol.add_argument("--decisions", type=int, default=200)
     for parser in (sim, col, feat, tr, pol):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
@@ -83,8 +86,9 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     _positive("--decisions", args.decisions)
     from depthq.evaluate.bench import bench_policy
 
-    r = bench_policy(args.checkpoint, args.decisions, device=args.device)
-    return r, f"{r['ms_median']} ms median per decision ({r['ms_p90']} ms p90, {r['threads']} threads)"
+    r = bench_policy(args.policy, args.decisions, device=args.device)
+    each = [f"{p['policy']}: {p['ms_median']} ms median ({p['ms_p90']} ms p90)" for p in r["policies"]]
+    return r, "per decision: " + "; ".join(each) + f" ({r['threads']} threads)"
 
 
 def run(args: argparse.Namespace) -> int:
