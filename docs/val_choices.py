@@ -40,6 +40,13 @@ VARIANTS: dict[str, dict] = {
     # The trunk's feature: 320 channels × 4 image columns instead of the global pool (same size).
     "depth_n200_columns": {"model": "depth", "runs": 200, "trunk": "efficientnet_lite0_columns"},
     "coll_n500_columns": {"model": "coll", "runs": 500, "trunk": "efficientnet_lite0_columns"},
+    # Why Coll-Q-Net is strong here: the two networks side by side on the column feature, and
+    # Coll-Q-Net with the paper's own rate and raw action (measurements, not choices).
+    "coll_n200_columns": {"model": "coll", "runs": 200, "trunk": "efficientnet_lite0_columns"},
+    "depth_n500_columns": {"model": "depth", "runs": 500, "trunk": "efficientnet_lite0_columns"},
+    "coll_n500_columns_paper": {
+        "model": "coll", "runs": 500, "trunk": "efficientnet_lite0_columns", "lr": 0.01, "action_scale": 1.0
+    },
 }
 
 
@@ -50,7 +57,7 @@ def run_variant(data: Path, out: Path, name: str) -> dict:
     if summary_path.is_file():
         result = read_json(summary_path)
     else:
-        result = evaluate(str(ckpt), ev, EvalConfig(canyons=parse_canyon_set(CANYONS)))
+        result = evaluate(str(ckpt), ev, EvalConfig(canyons=parse_canyon_set(CANYONS)), video=False)
     s = result["summary"]
     return {
         "variant": name,
