@@ -47,6 +47,9 @@ VARIANTS: dict[str, dict] = {
     "coll_n500_columns_paper": {
         "model": "coll", "runs": 500, "trunk": "efficientnet_lite0_columns", "lr": 0.01, "action_scale": 1.0
     },
+    "depth_n500_columns_action1": {
+        "model": "depth", "runs": 500, "trunk": "efficientnet_lite0_columns", "action_scale": 1.0
+    },
 }
 
 

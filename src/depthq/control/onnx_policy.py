@@ -29,6 +29,9 @@ class OnnxPolicy:
         if not path.is_file():
             raise ConfigError(f"onnx:{path}: no such file")
         options = ort.SessionOptions()
+        # No busy-waiting between runs: a policy decides a few times a second, beside other processes
+        # (a robot's ROS nodes, torch in a benchmark), and spinning threads would steal their cores.
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         if threads is not None:
             options.intra_op_num_threads = threads
         try:
