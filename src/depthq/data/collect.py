@@ -13,10 +13,10 @@ whatever the number of workers and however often the collection was interrupted 
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
 from depthq.errors import ConfigError
-from depthq.parallel import next_result
+from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig
@@ -137,15 +137,19 @@ def collect_and_write(
     return run.meta, write_run(run_path(root, split, index), run, config.data.jpeg_quality)
 
 
-def _worker(config: CollectConfig, seed: int, root: str, tasks, results) -> None:
-    """Collect and write runs from the task queue; the parent alone writes the manifest."""
-    env = CanyonEnv(config.env)
-    try:
-        while (task := tasks.get()) is not None:
-            meta, info = collect_and_write(env, config, seed, Path(root), *task)
-            results.put((to_dict(meta), info.sha256, info.bytes))
-    finally:
-        env.close()
+class _CollectWorker:
+    """One simulator collecting and writing run after run (a worker of `depthq.parallel`); only the
+    parent writes the manifest."""
+
+    def __init__(self, config: CollectConfig, seed: int, root: str) -> None:
+        self.config, self.seed, self.root = config, seed, Path(root)
+        self.env = CanyonEnv(config.env)
+
+    def __call__(self, task: tuple[str, int]) -> tuple[RunMeta, FileInfo]:
+        return collect_and_write(self.env, self.config, self.seed, self.root, *task)
+
+    def close(self) -> None:
+        self.env.close()
 
 
 def collect(
@@ -155,6 +159,7 @@ def collect(
     workers: int = 1,
     overwrite: bool = False,
     progress: bool = True,
+    executor: Executor = LOCAL,
 ) -> Dataset:
     """Collect until each split holds `runs` / `val_runs` usable runs with no gap; resume what is there.
 
@@ -173,7 +178,7 @@ def collect(
         while todo := _missing(dataset, wanted, config.data.min_frames):
             bar.n = sum(wanted.values()) - len(todo)
             bar.refresh()
-            for meta, info in _run_all(todo, config, seed, dataset, workers):
+            for meta, info in _run_all(todo, config, seed, dataset, workers, executor):
                 dataset.add(meta, info)
                 steps += meta.n_frames
                 bar.update(1)
@@ -209,36 +214,15 @@ def _missing(dataset: Dataset, wanted: dict[str, int], min_frames: int) -> list[
 
 
 def _run_all(
-    todo, config: CollectConfig, seed: int, dataset: Dataset, workers: int
+    todo, config: CollectConfig, seed: int, dataset: Dataset, workers: int, executor: Executor
 ) -> Iterator[tuple[RunMeta, FileInfo]]:
-    if not todo:
-        return
-    if workers == 1:
-        env = CanyonEnv(config.env)
+    if workers == 1 and executor.kind == "local":  # in this process: no worker to start
+        worker = _CollectWorker(config, seed, str(dataset.root))
         try:
-            for split, index in todo:
-                yield collect_and_write(env, config, seed, dataset.root, split, index)
+            yield from (worker(task) for task in todo)
         finally:
-            env.close()
+            worker.close()
         return
-    ctx = mp.get_context("spawn")  # EGL contexts do not survive a fork
-    tasks, results = ctx.Queue(), ctx.Queue()
-    for task in todo:
-        tasks.put(task)
-    procs = [
-        ctx.Process(target=_worker, args=(config, seed, str(dataset.root), tasks, results), daemon=True)
-        for _ in range(workers)
-    ]
-    for _ in procs:
-        tasks.put(None)
-    for p in procs:
-        p.start()
-    try:
-        for _ in todo:
-            meta, sha, size = next_result(results, procs, "collection")
-            yield RunMeta(**meta), FileInfo(sha256=sha, bytes=size)
-    finally:
-        for p in procs:
-            if p.is_alive():
-                p.terminate()
-            p.join()
+    make_worker = partial(_CollectWorker, config, seed, str(dataset.root))
+    for _, result in executor.run(make_worker, todo, workers, "collection"):
+        yield result

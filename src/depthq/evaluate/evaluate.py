@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import csv
 import io
-import multiprocessing as mp
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,7 @@ from tqdm import tqdm
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE, distance_from_spawn, imitation_loss, summarize
-from depthq.parallel import next_result
+from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import N_EVAL_CANYONS, CanyonId
 from depthq.sim.env import EnvConfig
 from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig
@@ -164,25 +164,28 @@ def drive(
     }
 
 
-def _worker(policy_spec: str, config: EvalConfig, tasks, results, device: str = "cpu") -> None:
-    import torch
+class _EvalWorker:
+    """One policy and one simulator, driving canyon after canyon (a worker of `depthq.parallel`)."""
 
-    from depthq.control.heuristic import DepthHeuristic
-    from depthq.control.registry import make_policy
-    from depthq.sim.env import CanyonEnv
+    def __init__(self, policy_spec: str, config: EvalConfig, device: str = "cpu") -> None:
+        import torch
 
-    torch.set_num_threads(1)  # same float sums in every process: results independent of W
-    policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
-    env, expert = CanyonEnv(config.env), DepthHeuristic()
-    try:
-        while (task := tasks.get()) is not None:
-            k, canyon = task
-            keep = FIG4_EVERY if k == 0 else 0
-            results.put(
-                (k, drive(policy, env, expert, canyon, config.seed + int(canyon.split(":")[1]), keep, k == 0))
-            )
-    finally:
-        env.close()
+        from depthq.control.heuristic import DepthHeuristic
+        from depthq.control.registry import make_policy
+        from depthq.sim.env import CanyonEnv
+
+        torch.set_num_threads(1)  # same float sums in every process: results independent of W
+        self.seed = config.seed
+        self.policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
+        self.env, self.expert = CanyonEnv(config.env), DepthHeuristic()
+
+    def __call__(self, task: tuple[int, str]) -> dict[str, Any]:
+        k, canyon = task  # the first canyon keeps Fig. 4 snapshots and the video's frames
+        seed = self.seed + int(canyon.split(":")[1])
+        return drive(self.policy, self.env, self.expert, canyon, seed, FIG4_EVERY if k == 0 else 0, k == 0)
+
+    def close(self) -> None:
+        self.env.close()
 
 
 def evaluate(
@@ -193,10 +196,11 @@ def evaluate(
     progress: bool = True,
     device: str = "auto",
     video: bool = True,
+    executor: Executor = LOCAL,
 ) -> dict[str, Any]:
     """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
     files to `out`; a Q-net runs on `device` (`depthq.nets.device`). `video`: the first canyon as
-    video.mp4 (`depthq.evaluate.video`)."""
+    video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     from depthq.control.registry import make_policy
@@ -207,39 +211,20 @@ def evaluate(
     description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
-    ctx = mp.get_context("spawn")
-    tasks, results = ctx.Queue(), ctx.Queue()
-    for task in enumerate(config.canyons):
-        tasks.put(task)
-    workers = min(workers, len(config.canyons))
-    for _ in range(workers):
-        tasks.put(None)
-    procs = [
-        ctx.Process(target=_worker, args=(policy_spec, config, tasks, results, where), daemon=True)
-        for _ in range(workers)
-    ]
-    for p in procs:
-        p.start()
     runs: dict[int, dict[str, Any]] = {}
     start = time.perf_counter()
-    try:
-        with tqdm(
-            total=len(config.canyons),
-            desc=f"evaluate {Path(policy_spec).name}",
-            unit="canyon",
-            disable=not progress,
-            dynamic_ncols=True,
-        ) as bar:
-            while len(runs) < len(config.canyons):
-                k, run = next_result(results, procs, "evaluation")
-                runs[k] = run
-                bar.update(1)
-                bar.set_postfix(success=sum(r["success"] for r in runs.values()))
-    finally:
-        for p in procs:
-            p.join(timeout=10)
-            if p.is_alive():
-                p.terminate()
+    make_worker = partial(_EvalWorker, policy_spec, config, where)
+    with tqdm(
+        total=len(config.canyons),
+        desc=f"evaluate {Path(policy_spec).name}",
+        unit="canyon",
+        disable=not progress,
+        dynamic_ncols=True,
+    ) as bar:
+        for k, run in executor.run(make_worker, list(enumerate(config.canyons)), workers, "evaluation"):
+            runs[k] = run
+            bar.update(1)
+            bar.set_postfix(success=sum(r["success"] for r in runs.values()))
     ordered = [runs[k] for k in sorted(runs)]
     offline = None
     if Path(policy_spec).is_dir():

@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from depthq.configio import provenance, read_json, to_dict, write_json
 from depthq.errors import ConfigError
+from depthq.parallel import LOCAL, Executor
 from depthq.report.layout import NETS, model_name
 from depthq.report.presets import Preset, get_preset
 
@@ -42,8 +43,9 @@ def _eval_done(folder: Path) -> bool:
     return (folder / "summary.json").is_file()
 
 
-def build_stages(preset: Preset, out: Path, device: str = "cpu") -> list[Stage]:
-    """The pipeline as an ordered list of resumable stages; networks run on `device`."""
+def build_stages(preset: Preset, out: Path, device: str = "cpu", executor: Executor = LOCAL) -> list[Stage]:
+    """The pipeline as an ordered list of resumable stages; networks run on `device`, collection
+    and evaluation tasks on `executor` (training runs here, one model after the other)."""
     from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
     from depthq.data.manifest import Dataset
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
@@ -69,7 +71,7 @@ def build_stages(preset: Preset, out: Path, device: str = "cpu") -> list[Stage]:
         Stage(
             "collect",
             lambda: collection_complete(data, collect_config),
-            lambda: collect(data, collect_config, seed=0, workers=preset.workers),
+            lambda: collect(data, collect_config, seed=0, workers=preset.workers, executor=executor),
         ),
         Stage(
             "features",
@@ -83,7 +85,7 @@ def build_stages(preset: Preset, out: Path, device: str = "cpu") -> list[Stage]:
             Stage(
                 f"evaluate {ref}",
                 lambda f=folder: _eval_done(f),
-                lambda r=ref, f=folder: evaluate(r, f, eval_config, preset.workers),
+                lambda r=ref, f=folder: evaluate(r, f, eval_config, preset.workers, executor=executor),
             )
         )
     extra = {} if preset.epochs is None else {"epochs": preset.epochs}
@@ -113,7 +115,9 @@ def build_stages(preset: Preset, out: Path, device: str = "cpu") -> list[Stage]:
                     Stage(
                         f"evaluate {name}",
                         lambda f=ev: _eval_done(f),
-                        lambda f=ev, c=ckpt: evaluate(str(c), f, eval_config, preset.workers, device=device),
+                        lambda f=ev, c=ckpt: evaluate(
+                            str(c), f, eval_config, preset.workers, device=device, executor=executor
+                        ),
                     )
                 )
     return stages
@@ -134,8 +138,11 @@ def _claim(out: Path, preset: Preset) -> None:
     write_json(marker, {"preset": to_dict(preset), "provenance": provenance()})
 
 
-def reproduce(preset_name: str, out: Path, progress: bool = True, device: str = "auto") -> dict[str, float]:
-    """Run (or resume) the whole pipeline, networks on `device`; returns the measured seconds per stage."""
+def reproduce(
+    preset_name: str, out: Path, progress: bool = True, device: str = "auto", executor: Executor = LOCAL
+) -> dict[str, float]:
+    """Run (or resume) the whole pipeline, networks on `device`, collection and evaluation on
+    `executor`; returns the measured seconds per stage."""
     from depthq.nets.device import resolve_device
     from depthq.report.build import build_report
 
@@ -145,7 +152,7 @@ def reproduce(preset_name: str, out: Path, progress: bool = True, device: str = 
     _claim(out, preset)
     times_path = out / "stages.json"
     times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
-    stages = build_stages(preset, out, where)
+    stages = build_stages(preset, out, where, executor)
     with tqdm(
         total=len(stages),
         desc=f"reproduce {preset.name}",

@@ -6,6 +6,8 @@ import argparse
 import time
 from pathlib import Path
 
+from depthq.parallel import add_executor_arguments, executor_from
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=900, help="training runs")
@@ -18,6 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
+    add_executor_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
     env = exploration_env() if args.hz is None else exploration_env(args.hz)
     config = CollectConfig(runs=args.runs, val_runs=args.val_runs, max_steps=args.max_steps, env=env)
     start = time.perf_counter()
-    dataset = collect(args.out, config, args.seed, workers=args.workers, overwrite=args.overwrite)
+    executor = executor_from(args)
+    dataset = collect(args.out, config, args.seed, args.workers, args.overwrite, executor=executor)
     elapsed = time.perf_counter() - start
     size = sum(p.stat().st_size for p in (args.out / "runs").glob("*.h5"))
     frames = sum(e.n_frames for e in dataset.entries())

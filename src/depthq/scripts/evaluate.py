@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from depthq.nets.device import DEVICE_HELP
+from depthq.parallel import add_executor_arguments, executor_from
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,6 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.add_argument("--no-video", action="store_true", help="skip video.mp4 of the first canyon")
+    add_executor_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +41,8 @@ def run(args: argparse.Namespace) -> int:
         decision_hz=args.hz,
     )
     result = evaluate(
-        args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video
+        args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
+        executor=executor_from(args),
     )
     s = result["summary"]
     if args.json:

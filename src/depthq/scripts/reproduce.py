@@ -6,18 +6,20 @@ import argparse
 from pathlib import Path
 
 from depthq.nets.device import DEVICE_HELP
+from depthq.parallel import add_executor_arguments, executor_from
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default="quick", help="smoke (≈ 5 min), quick (≤ 45 min) or paper (≤ 3 h)")
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed when run again)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
+    add_executor_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.report.reproduce import reproduce
 
-    times = reproduce(args.preset, args.out, device=args.device)
+    times = reproduce(args.preset, args.out, device=args.device, executor=executor_from(args))
     total = sum(times.values())
     print("\n".join(f"{k:>40}: {v:8.1f} s" for k, v in times.items()))
     print(f"preset {args.preset}: {total / 60:.1f} min of stage time; report at {args.out / 'report.html'}")

@@ -1,0 +1,67 @@
+"""Executors: the same results from local processes and from Ray (a real Ray started on this
+machine), and a failing worker named instead of a hang."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from depthq.cli import main
+from depthq.data.collect import CollectConfig, collect
+from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import EvalConfig, evaluate
+from depthq.parallel import Executor
+
+ray = pytest.importorskip("ray")
+
+
+@pytest.fixture(scope="module")
+def on_ray():
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield Executor("ray")
+    ray.shutdown()
+
+
+def _without_timing(runs: list[dict]) -> list[dict]:
+    return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
+
+
+def test_ray_gives_the_local_results(tmp_path: Path, on_ray: Executor) -> None:
+    config = EvalConfig(canyons=("val:1000", "val:1001", "val:1002"), time_limit_s=5.0)
+    local = evaluate("ou", tmp_path / "local", config, workers=2, progress=False, video=False)
+    remote = evaluate("ou", tmp_path / "ray", config, workers=2, progress=False, video=False, executor=on_ray)
+    assert _without_timing(remote["runs"]) == _without_timing(local["runs"])
+    assert [r["canyon"] for r in remote["runs"]] == list(config.canyons)
+
+    data = CollectConfig(runs=3, val_runs=1, max_steps=30)
+    collect(tmp_path / "d_local", data, seed=1, workers=2, progress=False)
+    collect(tmp_path / "d_ray", data, seed=1, workers=2, progress=False, executor=on_ray)
+    manifest = "manifest.json"
+    assert (tmp_path / "d_ray" / manifest).read_bytes() == (tmp_path / "d_local" / manifest).read_bytes()
+
+
+class Failing:
+    """A worker whose second task fails."""
+
+    def __call__(self, task: int) -> int:
+        if task == 1:
+            raise ValueError(f"task {task} is bad")
+        return task
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_failing_worker_is_reported_with_its_error() -> None:
+    with pytest.raises(RuntimeError, match=r"(?s)a demo worker failed on task 1.*ValueError: task 1 is bad"):
+        list(Executor().run(Failing, [0, 1, 2], workers=1, what="demo"))
+
+
+def test_bad_executor_settings_are_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ConfigError, match="--executor must be one of"):
+        Executor("slurm")
+    with pytest.raises(ConfigError, match="needs --executor ray"):
+        Executor("local", "auto")
+    assert main(["evaluate", "heuristic", "--out", str(tmp_path / "o"), "--executor", "dask"]) == 2
+    assert "dask" in capsys.readouterr().err and not (tmp_path / "o").exists()
