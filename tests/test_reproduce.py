@@ -8,6 +8,7 @@ import pytest
 
 from depthq.cli import main
 from depthq.configio import read_json
+from depthq.parallel import Executor
 from depthq.report.presets import get_preset
 from depthq.report.reproduce import build_stages, reproduce
 
@@ -25,8 +26,16 @@ def test_tables_hold_numbers_for_both_networks(smoke):
     assert [r["runs"] for r in rows] == ["3", "6"]
     number = re.compile(r"^\d+\.\d+ \(\d+\.\d+\)$")
     for row in rows:
-        for column in ("distance CQN", "distance DQN", "success CQN", "success DQN", "imitation CQN",
-                       "imitation DQN", "cross-entropy CQN", "abs diff DQN"):
+        for column in (
+            "distance CQN",
+            "distance DQN",
+            "success CQN",
+            "success DQN",
+            "imitation CQN",
+            "imitation DQN",
+            "cross-entropy CQN",
+            "abs diff DQN",
+        ):
             assert number.match(row[column]), (column, row[column])
         assert re.match(r"^\d+% \(\d+%\)$", row["circling CQN"]), row["circling CQN"]
     table1 = (smoke / "table1.md").read_text()
@@ -58,6 +67,23 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
         if path != redone:
             assert path.stat().st_mtime_ns == stamp, f"{path} was redone"
     assert set(read_json(smoke / "stages.json")) == set(times)
+
+
+def test_the_stage_runner_on_ray_gives_the_same_tables(smoke, tmp_path):
+    """The smoke preset's evaluations (reference policies and every model) redone as Ray tasks on
+    a Ray started here, from the same dataset and checkpoints: the same tables to the byte."""
+    ray = pytest.importorskip("ray")
+    copy = tmp_path / "out"
+    shutil.copytree(
+        smoke, copy, ignore=shutil.ignore_patterns("eval", "table*", "report.html", "*.png", "*.mp4")
+    )
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        reproduce("smoke", copy, progress=False, executor=Executor("ray"))
+    finally:
+        ray.shutdown()
+    for name in ("table1.csv", "table1.md", "table2.md"):
+        assert (copy / name).read_bytes() == (smoke / name).read_bytes(), name
 
 
 def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
