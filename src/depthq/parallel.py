@@ -15,6 +15,7 @@ same whatever the executor and the number of workers or nodes; callers order the
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import queue
 import traceback
@@ -50,6 +51,8 @@ class Executor:
             raise ConfigError(f"--executor must be one of {EXECUTORS}, got {self.kind!r}")
         if self.address is not None and self.kind != "ray":
             raise ConfigError(f"--ray-address {self.address!r} needs --executor ray")
+        if self.kind == "ray" and importlib.util.find_spec("ray") is None:  # before any work starts
+            raise ConfigError('--executor ray needs Ray: pip install "depthq[ray]"')
 
     def run(
         self, make_worker: Callable[[], Worker], tasks: Sequence[Any], workers: int, what: str
@@ -127,11 +130,9 @@ class _RayWorker:
 
 
 def _run_ray(make_worker, tasks, workers: int, what: str, address: str | None) -> Iterator[tuple[int, Any]]:
-    try:
-        import ray
-        from ray.util import ActorPool
-    except ModuleNotFoundError:
-        raise ConfigError('--executor ray needs Ray: pip install "depthq[ray]"') from None
+    import ray
+    from ray.util import ActorPool
+
     if not ray.is_initialized():
         # Workers render offscreen like this process; MUJOCO_GL must be set before mujoco is imported.
         env = {"MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
