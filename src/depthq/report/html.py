@@ -74,25 +74,23 @@ DEVIATIONS = [
 ]
 
 
-def img(path: Path, alt: str) -> str:
+def _figure(path: Path, alt: str, element: str) -> str:
+    """`element` (with `{src}` for the file as a data URI) in a captioned figure; a note if missing."""
+    caption = html.escape(alt)
     if not path.is_file():
-        return f"<p><em>{html.escape(alt)}: not produced</em></p>"
-    data = base64.b64encode(path.read_bytes()).decode()
-    return (
-        f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}"><figcaption>'
-        f"{html.escape(alt)}</figcaption></figure>"
-    )
+        return f"<p><em>{caption}: not produced</em></p>"
+    src = base64.b64encode(path.read_bytes()).decode()
+    return f"<figure>{element.format(src=src, alt=caption)}<figcaption>{caption}</figcaption></figure>"
+
+
+def img(path: Path, alt: str) -> str:
+    return _figure(path, alt, '<img alt="{alt}" src="data:image/png;base64,{src}">')
 
 
 def video(path: Path, alt: str) -> str:
     """An MP4 inlined like the figures (H.264 plays in every current browser)."""
-    if not path.is_file():
-        return f"<p><em>{html.escape(alt)}: not produced</em></p>"
-    data = base64.b64encode(path.read_bytes()).decode()
-    return (
-        f'<figure><video controls muted loop preload="auto" title="{html.escape(alt)}" '
-        f'src="data:video/mp4;base64,{data}"></video><figcaption>{html.escape(alt)}</figcaption></figure>'
-    )
+    element = '<video controls muted loop title="{alt}" src="data:video/mp4;base64,{src}"></video>'
+    return _figure(path, alt, element)
 
 
 def table(rows: list[dict[str, str]]) -> str:
