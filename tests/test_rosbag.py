@@ -79,25 +79,47 @@ def _twist(linear: float, angular: float):
     return rosbag.twist_msg(linear, angular)
 
 
+def _frame_msg(rgb: np.ndarray, ns: int, raw: bool):
+    if not raw:
+        return rosbag.image_msg(encode_jpeg(rgb, 90), ns)
+    h, w, _ = rgb.shape
+    return rosbag.TYPESTORE.types["sensor_msgs/msg/Image"](
+        header=rosbag.header_msg(ns, "camera"),
+        height=h,
+        width=w,
+        encoding="bgr8",
+        is_bigendian=0,
+        step=w * 3,
+        data=rgb[..., ::-1].reshape(-1).copy(),
+    )
+
+
 def write_bag(
     path: Path,
     frames_ms: list[int],
     cmds: list[tuple[int, float, float]],
     scan_stamps_ms: list[int] | None = None,
     scan_type: str = "sensor_msgs/msg/LaserScan",
+    raw: bool = False,
 ) -> Path:
     """A recording as a robot makes one: frames and scans stamped in their headers, commands as sent
-    (logged when sent: a Twist has no header); `scan_stamps_ms` overrides the scans' header stamps."""
+    (logged when sent: a Twist has no header); `scan_stamps_ms` overrides the scans' header stamps.
+    `raw`: uncompressed bgr8 frames on /camera/image_raw and TwistStamped commands, logged 100 ms
+    late (the import must use their header stamps)."""
     ts = rosbag.TYPESTORE
-    jpeg = encode_jpeg(np.full((24, 32, 3), 128, np.uint8), 90)
+    rgb = np.zeros((24, 32, 3), np.uint8) + np.array([10, 120, 230], np.uint8)
     with Writer(path, version=9) as writer:
-        image = writer.add_connection(
-            "/camera/image_raw/compressed", "sensor_msgs/msg/CompressedImage", typestore=ts
-        )
+        if raw:
+            image = writer.add_connection("/camera/image_raw", "sensor_msgs/msg/Image", typestore=ts)
+            cmd = writer.add_connection("/cmd_vel", "geometry_msgs/msg/TwistStamped", typestore=ts)
+        else:
+            image = writer.add_connection(
+                "/camera/image_raw/compressed", "sensor_msgs/msg/CompressedImage", typestore=ts
+            )
+            cmd = writer.add_connection("/cmd_vel", "geometry_msgs/msg/Twist", typestore=ts)
         scan = writer.add_connection("/scan", scan_type, typestore=ts)
-        cmd = writer.add_connection("/cmd_vel", "geometry_msgs/msg/Twist", typestore=ts)
         odom = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts)
-        messages = [(t * MS, image, rosbag.image_msg(jpeg, t * MS)) for t in frames_ms]
+        messages = [(t * MS, image, _frame_msg(rgb, t * MS, raw)) for t in frames_ms]
         stamps = frames_ms if scan_stamps_ms is None else scan_stamps_ms
         for t, stamp in zip(frames_ms, stamps, strict=True):  # logged with the frame, stamped as given
             msg = (
@@ -107,21 +129,31 @@ def write_bag(
             )
             messages.append((t * MS, scan, msg))
             messages.append((t * MS, odom, rosbag.odom_msg(np.array([t / 1000, 0, 0]), 0.5, 0.0, t * MS)))
-        messages += [(t * MS, cmd, _twist(lin, ang)) for t, lin, ang in cmds]
+        for t, lin, ang in cmds:
+            if raw:
+                stamped = ts.types["geometry_msgs/msg/TwistStamped"](
+                    header=rosbag.header_msg(t * MS, "base_link"), twist=_twist(lin, ang)
+                )
+                messages.append(((t + 100) * MS, cmd, stamped))
+            else:
+                messages.append((t * MS, cmd, _twist(lin, ang)))
         for ns, conn, msg in sorted(messages, key=lambda m: m[0]):
             writer.write(conn, ns, ts.serialize_cdr(msg, conn.msgtype))
     return path
 
 
-def test_a_recording_is_cut_where_the_robot_stops_or_the_frames_stop(tmp_path: Path) -> None:
+@pytest.mark.parametrize("raw", [False, True], ids=["compressed+Twist", "bgr8+TwistStamped"])
+def test_a_recording_is_cut_where_the_robot_stops_or_the_frames_stop(tmp_path: Path, raw: bool) -> None:
     # 4 Hz frames; each command is sent 30 ms after its frame (the node's latency). Frames 0-9 drive,
     # 10-14 stand still, 15-24 drive, then 3 s without frames, then 25-32 drive.
     frames = [250 * i for i in range(25)] + [250 * 24 + 3000 + 250 * i for i in range(1, 9)]
     linear = [0.5] * 10 + [0.0] * 5 + [0.5] * 18
     angular = [round(0.1 * (i % 7) - 0.3, 1) for i in range(len(frames))]
     cmds = [(t + 30, v, w) for t, v, w in zip(frames, linear, angular, strict=True)]
-    bag = write_bag(tmp_path / "rec", frames, cmds)
-    dataset = rosbag.import_bag(bag, tmp_path / "data", rosbag.ImportConfig(val_runs=1), progress=False)
+    bag = write_bag(tmp_path / "rec", frames, cmds, raw=raw)
+    topics = rosbag.Topics(image="/camera/image_raw") if raw else rosbag.Topics()
+    config = rosbag.ImportConfig(topics=topics, val_runs=1)
+    dataset = rosbag.import_bag(bag, tmp_path / "data", config, progress=False)
     runs = [dataset.read_run(e) for e in dataset.entries()]
     # run 1: frames 0-10 (10 is where it stood); run 2: 15-24 (24 is the last before the gap); run 3: 25-32
     assert [(r.meta.split, r.n_frames) for r in runs] == [("train", 11), ("train", 10), ("val", 8)]
@@ -131,6 +163,7 @@ def test_a_recording_is_cut_where_the_robot_stops_or_the_frames_stop(tmp_path: P
     assert np.allclose(runs[1].times, np.arange(10) * 0.25)
     assert np.allclose(runs[1].bins, 1.5)
     assert np.allclose(runs[2].poses[:, 0], np.asarray(frames[25:]) / 1000)
+    assert np.abs(runs[0].images[0, 12, 16].astype(int) - [10, 120, 230]).max() <= 3  # RGB, not BGR
 
 
 def _nothing_left(parent: Path, out: Path) -> bool:

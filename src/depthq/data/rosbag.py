@@ -76,7 +76,7 @@ def _stamp_ns(header: Any) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
-def _header(ns: int, frame_id: str) -> Any:
+def header_msg(ns: int, frame_id: str) -> Any:
     t = TYPESTORE.types
     stamp = t["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
     return t["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id)
@@ -139,14 +139,14 @@ def export_bag(data: Path, out: Path, storage: str = "mcap", progress: bool = Tr
 
 def image_msg(jpeg: bytes, ns: int) -> Any:
     return TYPESTORE.types["sensor_msgs/msg/CompressedImage"](
-        header=_header(ns, "camera_rgb_optical_frame"), format="jpeg", data=np.frombuffer(jpeg, np.uint8)
+        header=header_msg(ns, "camera_rgb_optical_frame"), format="jpeg", data=np.frombuffer(jpeg, np.uint8)
     )
 
 
 def scan_msg(scan: np.ndarray, ns: int, lidar: LidarConfig) -> Any:
     step = 2 * math.pi / N_RAYS
     return TYPESTORE.types["sensor_msgs/msg/LaserScan"](
-        header=_header(ns, "base_scan"),
+        header=header_msg(ns, "base_scan"),
         angle_min=0.0,
         angle_max=step * (N_RAYS - 1),
         angle_increment=step,
@@ -171,7 +171,7 @@ def odom_msg(pose: np.ndarray, linear: float, angular: float, ns: int) -> Any:
         position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0), orientation=orientation
     )
     return t["nav_msgs/msg/Odometry"](
-        header=_header(ns, "odom"),
+        header=header_msg(ns, "odom"),
         child_frame_id="base_footprint",
         pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=pose_msg, covariance=np.zeros(36)),
         twist=t["geometry_msgs/msg/TwistWithCovariance"](
