@@ -23,8 +23,8 @@ from depthq.report.tables import (
 )
 
 
-def _best_depth_eval(out: Path, preset: Preset) -> Path | None:
-    """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4)."""
+def best_depth_eval(out: Path, preset: Preset) -> Path | None:
+    """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4 and its video)."""
     best, best_distance = None, -1.0
     for n in preset.subsets:
         for s in preset.seeds:
@@ -63,7 +63,7 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     atomic_write_bytes(out / "table2.md", ("# Table II\n\n" + markdown(t2)).encode())
     plot_fig5(out, preset.subsets, preset.seeds, out / "fig5_convergence.png")
     plot_success_vs_runs(out, preset.subsets, preset.seeds, out / "success_vs_runs.png")
-    best = _best_depth_eval(out, preset)
+    best = best_depth_eval(out, preset)
     for name, copy in (("fig4_qualitative.png", "fig4_qualitative.png"), ("video.mp4", "fig4_video.mp4")):
         if best is not None and (best / name).is_file():
             shutil.copyfile(best / name, out / copy)

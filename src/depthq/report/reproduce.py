@@ -20,16 +20,21 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
-from depthq.configio import provenance, read_json, to_dict, write_json
+from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict, write_json
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
+from depthq.report.build import best_depth_eval, build_report
 from depthq.report.layout import NETS, model_name
 from depthq.report.presets import Preset, get_preset
+
+if TYPE_CHECKING:
+    from depthq.evaluate.evaluate import EvalConfig
 
 
 @dataclass(frozen=True)
@@ -85,7 +90,9 @@ def build_stages(preset: Preset, out: Path, device: str = "cpu", executor: Execu
             Stage(
                 f"evaluate {ref}",
                 lambda f=folder: _eval_done(f),
-                lambda r=ref, f=folder: evaluate(r, f, eval_config, preset.workers, executor=executor),
+                lambda r=ref, f=folder: evaluate(
+                    r, f, eval_config, preset.workers, video=False, executor=executor
+                ),
             )
         )
     extra = {} if preset.epochs is None else {"epochs": preset.epochs}
@@ -116,11 +123,29 @@ def build_stages(preset: Preset, out: Path, device: str = "cpu", executor: Execu
                         f"evaluate {name}",
                         lambda f=ev: _eval_done(f),
                         lambda f=ev, c=ckpt: evaluate(
-                            str(c), f, eval_config, preset.workers, device=device, executor=executor
+                            str(c), f, eval_config, preset.workers, device, video=False, executor=executor
                         ),
                     )
                 )
+    # One video, of the model the report shows: its first canyon driven again (the same run).
+    stages.append(
+        Stage(
+            "video of the best Depth-Q-Net",
+            lambda: (best := best_depth_eval(out, preset)) is None or (best / "video.mp4").is_file(),
+            lambda: _video_of_best(out, preset, eval_config, device),
+        )
+    )
     return stages
+
+
+def _video_of_best(out: Path, preset: Preset, eval_config: EvalConfig, device: str) -> None:
+    from depthq.evaluate.evaluate import evaluate
+
+    best = best_depth_eval(out, preset)
+    first = out / "video" / best.name
+    config = replace(eval_config, canyons=eval_config.canyons[:1])
+    evaluate(str(out / "models" / best.name), first, config, workers=1, progress=False, device=device)
+    atomic_write_bytes(best / "video.mp4", (first / "video.mp4").read_bytes())
 
 
 def _claim(out: Path, preset: Preset) -> None:
@@ -144,7 +169,6 @@ def reproduce(
     """Run (or resume) the whole pipeline, networks on `device`, collection and evaluation on
     `executor`; returns the measured seconds per stage."""
     from depthq.nets.device import resolve_device
-    from depthq.report.build import build_report
 
     where = str(resolve_device(device))  # a device torch cannot use fails here, before any work
     preset = get_preset(preset_name)
