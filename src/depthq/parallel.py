@@ -63,8 +63,9 @@ class Executor:
         if not tasks:
             return iter(())
         workers = min(workers, len(tasks))
-        runner = _run_ray if self.kind == "ray" else _run_local
-        return runner(make_worker, tasks, workers, what, self.address)
+        if self.kind == "ray":
+            return _run_ray(make_worker, tasks, workers, what, self.address)
+        return _run_local(make_worker, tasks, workers, what)
 
 
 def _serve(make_worker: Callable[[], Worker], tasks, results) -> None:
@@ -82,7 +83,7 @@ def _serve(make_worker: Callable[[], Worker], tasks, results) -> None:
         worker.close()
 
 
-def _run_local(make_worker, tasks, workers: int, what: str, _address) -> Iterator[tuple[int, Any]]:
+def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[int, Any]]:
     import multiprocessing as mp
 
     ctx = mp.get_context("spawn")

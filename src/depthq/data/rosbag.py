@@ -30,7 +30,8 @@ import shutil
 import struct
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import astuple, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,9 +50,7 @@ from depthq.sim.sensors import N_RAYS, BinConfig, LidarConfig, depth_bins
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)  # the TurtleBot3's distribution; these messages never changed
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-EPOCH_S = (
-    1_600_000_000  # the exported bag's first stamp (2020-09-13), fixed so equal datasets give equal bags
-)
+EPOCH_S = 1_600_000_000  # the exported bag's first stamp (2020-09-13): equal datasets, equal bags
 RUN_GAP_S = 10.0  # silence between two exported runs: longer than any import's max_gap_s
 STOPPED = 1e-3  # m/s: a command slower than this stands the robot still
 
@@ -112,7 +111,7 @@ def export_bag(data: Path, out: Path, storage: str = "mcap", progress: bool = Tr
             )
             conns = [
                 writer.add_connection(topic, msgtype, typestore=TYPESTORE)
-                for topic, msgtype in zip(Topics().__dict__.values(), types, strict=True)
+                for topic, msgtype in zip(astuple(Topics()), types, strict=True)
             ]
             start_ns = EPOCH_S * 1_000_000_000
             for entry in tqdm(dataset.entries(), desc="bag export", unit="run", disable=not progress):
@@ -212,10 +211,9 @@ class _Streams:
     frame_ns: np.ndarray  # (F,) image stamps
     scan_ns: np.ndarray  # (S,)
     scans: np.ndarray  # (S, 360) float32 in depthq's convention (0 invalid, inf no return)
-    cmd_ns: np.ndarray  # (C,)
-    cmds: np.ndarray  # (C, 2) linear x, angular z
     odom_ns: np.ndarray  # (O,)
     poses: np.ndarray  # (O, 3)
+    frame_cmds: np.ndarray  # (F, 2) linear x, angular z of the command in force after each frame
 
 
 def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), progress: bool = True) -> Dataset:
@@ -256,22 +254,18 @@ def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), prog
     return Dataset.open(out)
 
 
-class _open:
+@contextmanager
+def _open(bag: Path) -> Iterator[Reader]:
     """rosbags' Reader with every way a bag can be unreadable turned into a DataError naming it."""
-
-    def __init__(self, bag: Path) -> None:
-        self.bag = bag
-
-    def __enter__(self) -> Reader:
-        try:
-            self.reader = Reader(self.bag)
-            self.reader.open()
-        except (ReaderError, OSError, ValueError, KeyError) as err:
-            raise DataError(f"{self.bag}: not a readable rosbag2 bag ({err})") from err
-        return self.reader
-
-    def __exit__(self, *exc: object) -> None:
-        self.reader.close()
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except (ReaderError, OSError, ValueError, KeyError) as err:
+        raise DataError(f"{bag}: not a readable rosbag2 bag ({err})") from err
+    try:
+        yield reader
+    finally:
+        reader.close()
 
 
 def _connections(bag: Path, reader: Reader, topics: Topics) -> dict[str, Any]:
@@ -343,14 +337,15 @@ def _read_streams(bag: Path, reader: Reader, conns: dict[str, Any]) -> _Streams:
     for name, stamps in (("image", frame_ns), ("scan", scan_ns), ("cmd", cmd_ns)):
         if not stamps:
             raise DataError(f"{bag}: topic {topic[name]} has no messages")
+    frames, commands = _monotonic(bag, topic["image"], frame_ns), _monotonic(bag, topic["cmd"], cmd_ns)
+    cmds = np.asarray(cmds, np.float64)
     return _Streams(
-        frame_ns=_monotonic(bag, topic["image"], frame_ns),
+        frame_ns=frames,
         scan_ns=_monotonic(bag, topic["scan"], scan_ns),
         scans=np.asarray(scans, np.float32),
-        cmd_ns=_monotonic(bag, topic["cmd"], cmd_ns),
-        cmds=np.asarray(cmds, np.float64),
         odom_ns=_monotonic(bag, topic.get("odom", ""), odom_ns),
         poses=np.asarray(poses, np.float32).reshape(-1, 3),
+        frame_cmds=_frame_commands(frames, commands, cmds),
     )
 
 
@@ -378,11 +373,12 @@ def _nearest(stamps: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return pick, np.abs(stamps[pick] - at)
 
 
-def _frame_commands(s: _Streams) -> np.ndarray:
-    """(linear, angular) of the last command sent before the next frame (NaN before the first command)."""
-    until = np.append(s.frame_ns[1:], np.iinfo(np.int64).max)
-    last = np.searchsorted(s.cmd_ns, until, side="left") - 1
-    return np.where((last >= 0)[:, None], s.cmds[np.maximum(last, 0)], np.nan)
+def _frame_commands(frame_ns: np.ndarray, cmd_ns: np.ndarray, cmds: np.ndarray) -> np.ndarray:
+    """Per frame, (linear, angular) of the last command sent before the next frame (NaN before the
+    first command)."""
+    until = np.append(frame_ns[1:], np.iinfo(np.int64).max)
+    last = np.searchsorted(cmd_ns, until, side="left") - 1
+    return np.where((last >= 0)[:, None], cmds[np.maximum(last, 0)], np.nan)
 
 
 def _cut_runs(s: _Streams, max_gap_s: float) -> list[tuple[int, int]]:
@@ -390,7 +386,7 @@ def _cut_runs(s: _Streams, max_gap_s: float) -> list[tuple[int, int]]:
     gap_ns = max_gap_s * 1e9
     _, scan_offset = _nearest(s.scan_ns, s.frame_ns)
     has_scan = scan_offset <= gap_ns / 2
-    moving = np.abs(np.nan_to_num(_frame_commands(s)[:, 0])) > STOPPED
+    moving = np.abs(np.nan_to_num(s.frame_cmds[:, 0])) > STOPPED
     joined = np.append(np.diff(s.frame_ns) <= gap_ns, False)  # frame i and i + 1 belong together
     cuts, i, n = [], 0, len(s.frame_ns)
     while i < n:
@@ -452,7 +448,7 @@ def _make_run(
     frames = np.arange(first, last + 1)
     scan_idx, _ = _nearest(s.scan_ns, s.frame_ns[frames])
     scans = s.scans[scan_idx]
-    actions = _frame_commands(s)[frames, 1].astype(np.float32)
+    actions = s.frame_cmds[frames, 1].astype(np.float32)
     actions[-1] = np.nan
     if len(s.odom_ns):
         poses = s.poses[_nearest(s.odom_ns, s.frame_ns[frames])[0]]

@@ -120,27 +120,11 @@ def drive(
         values = getattr(policy, "last_values", None)
         before = obs
         obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
+        moment = {"values": values, "true_bins": obs["bins"], "pose": poses[-1], "action": action}
         if keep_every and step % keep_every == 0 and values is not None:
-            snaps.append(
-                {
-                    "step": step,
-                    "image": before["image"].copy(),
-                    "values": values.copy(),
-                    "true_bins": obs["bins"].copy(),
-                    "pose": poses[-1].copy(),
-                    "action": action,
-                }
-            )
+            snaps.append(_copy({**moment, "step": step, "image": before["image"]}))
         if video:
-            frames.append(
-                {
-                    "image": before["image"][::VIDEO_SCALE, ::VIDEO_SCALE].copy(),
-                    "values": None if values is None else values.copy(),
-                    "true_bins": obs["bins"].copy(),
-                    "pose": poses[-1].copy(),
-                    "action": action,
-                }
-            )
+            frames.append(_copy({**moment, "image": before["image"][::VIDEO_SCALE, ::VIDEO_SCALE]}))
         actions.append(action)
         poses.append(info["pose"])
         done = terminated or truncated
@@ -164,10 +148,17 @@ def drive(
     }
 
 
+def _copy(record: dict[str, Any]) -> dict[str, Any]:
+    """A moment of a run kept for a figure: arrays copied (the env reuses its buffers)."""
+    return {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in record.items()}
+
+
 class _EvalWorker:
     """One policy and one simulator, driving canyon after canyon (a worker of `depthq.parallel`)."""
 
-    def __init__(self, policy_spec: str, config: EvalConfig, device: str = "cpu") -> None:
+    def __init__(
+        self, policy_spec: str, config: EvalConfig, device: str = "cpu", video: bool = False
+    ) -> None:
         import torch
 
         from depthq.control.heuristic import DepthHeuristic
@@ -175,14 +166,15 @@ class _EvalWorker:
         from depthq.sim.env import CanyonEnv
 
         torch.set_num_threads(1)  # same float sums in every process: results independent of W
-        self.seed = config.seed
+        self.seed, self.video = config.seed, video
         self.policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
         self.env, self.expert = CanyonEnv(config.env), DepthHeuristic()
 
     def __call__(self, task: tuple[int, str]) -> dict[str, Any]:
-        k, canyon = task  # the first canyon keeps Fig. 4 snapshots and the video's frames
+        k, canyon = task  # the first canyon keeps Fig. 4 snapshots and, when wanted, the video's frames
         seed = self.seed + int(canyon.split(":")[1])
-        return drive(self.policy, self.env, self.expert, canyon, seed, FIG4_EVERY if k == 0 else 0, k == 0)
+        keep = FIG4_EVERY if k == 0 else 0
+        return drive(self.policy, self.env, self.expert, canyon, seed, keep, self.video and k == 0)
 
     def close(self) -> None:
         self.env.close()
@@ -213,7 +205,7 @@ def evaluate(
         config = replace(config, decision_hz=data_rate(policy_spec))
     runs: dict[int, dict[str, Any]] = {}
     start = time.perf_counter()
-    make_worker = partial(_EvalWorker, policy_spec, config, where)
+    make_worker = partial(_EvalWorker, policy_spec, config, where, video)
     with tqdm(
         total=len(config.canyons),
         desc=f"evaluate {Path(policy_spec).name}",
@@ -240,13 +232,11 @@ def evaluate(
         "runs": [{f: r[f] for f in RUN_FIELDS} for r in ordered],
         "seconds": round(time.perf_counter() - start, 2),
     }
-    _write(out, summary, ordered, video_fps=config.env.world.decision_hz if video else None)
+    _write(out, summary, ordered, video_fps=config.env.world.decision_hz)
     return summary
 
 
-def _write(
-    out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float | None = None
-) -> None:
+def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float) -> None:
     """summary.json last: a folder with a summary is complete."""
     from depthq.evaluate.figures import plot_fig4, plot_trajectories
     from depthq.evaluate.video import write_video
@@ -268,6 +258,6 @@ def _write(
     snaps = runs[0]["snapshots"]
     if snaps:
         plot_fig4(snaps, runs[0], summary["policy"], out / "fig4_qualitative.png")
-    if video_fps is not None and runs[0]["video"]:
+    if runs[0]["video"]:
         write_video(runs[0]["video"], runs[0], summary["policy"], out / "video.mp4", video_fps)
     write_json(out / "summary.json", summary)
