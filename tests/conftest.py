@@ -2,7 +2,19 @@
 
 import os
 
+import pytest
+
 os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+@pytest.fixture(scope="session")
+def smoke(tmp_path_factory):
+    """The smoke preset run end to end on this machine's processes (about a minute)."""
+    from depthq.report.reproduce import reproduce
+
+    out = tmp_path_factory.mktemp("smoke") / "out"
+    reproduce("smoke", out, progress=False)
+    return out
 
 
 def assert_video(path, n_frames: int, fps: float) -> None:

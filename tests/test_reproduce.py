@@ -11,20 +11,14 @@ from depthq.configio import read_json
 from depthq.parallel import Executor
 from depthq.report.presets import get_preset
 from depthq.report.reproduce import build_stages, reproduce
-
-
-@pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    out = tmp_path_factory.mktemp("smoke") / "out"
-    reproduce("smoke", out, progress=False)
-    return out
+from depthq.report.tables import interval
 
 
 def test_tables_hold_numbers_for_both_networks(smoke):
     with (smoke / "table1.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert [r["runs"] for r in rows] == ["3", "6"]
-    number = re.compile(r"^\d+\.\d+ \(\d+\.\d+\)$")
+    number = re.compile(r"^\d+\.\d+ \(–\)$")  # one seed: a mean, no spread, no interval
     for row in rows:
         for column in (
             "distance CQN",
@@ -37,7 +31,7 @@ def test_tables_hold_numbers_for_both_networks(smoke):
             "abs diff DQN",
         ):
             assert number.match(row[column]), (column, row[column])
-        assert re.match(r"^\d+% \(\d+%\)$", row["circling CQN"]), row["circling CQN"]
+        assert re.match(r"^\d+% \(–\)$", row["circling CQN"]), row["circling CQN"]
     table1 = (smoke / "table1.md").read_text()
     assert "| heuristic |" in table1 and "| ou |" in table1
     table2 = (smoke / "table2.md").read_text()
@@ -69,21 +63,67 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
     assert set(read_json(smoke / "stages.json")) == set(times)
 
 
-def test_the_stage_runner_on_ray_gives_the_same_tables(smoke, tmp_path):
-    """The smoke preset's evaluations (reference policies and every model) redone as Ray tasks on
-    a Ray started here, from the same dataset and checkpoints: the same tables to the byte."""
+def test_the_sweep_on_ray_gives_the_same_tables(smoke, tmp_path):
+    """The smoke preset from its dataset on, on a Ray started here: every training and every
+    evaluation a Ray task (trainings with this machine's thread count): the same tables to the byte."""
     ray = pytest.importorskip("ray")
     copy = tmp_path / "out"
-    shutil.copytree(
-        smoke, copy, ignore=shutil.ignore_patterns("eval", "table*", "report.html", "*.png", "*.mp4")
-    )
+    copy.mkdir()
+    shutil.copytree(smoke / "data", copy / "data")
+    shutil.copyfile(smoke / "reproduce.json", copy / "reproduce.json")
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
-        reproduce("smoke", copy, progress=False, executor=Executor("ray"))
+        times = reproduce("smoke", copy, progress=False, executor=Executor("ray"))
     finally:
         ray.shutdown()
+    assert "collect" not in times and {"train coll_n3_s0", "evaluate depth_n6_s0"} <= set(times)
     for name in ("table1.csv", "table1.md", "table2.md"):
         assert (copy / name).read_bytes() == (smoke / name).read_bytes(), name
+
+
+def test_a_sweep_widens_a_folder_and_reuses_its_models(smoke, tmp_path, capsys):
+    """More seeds and a setting's values on top of the smoke preset's folder: the preset's own
+    models are kept (dropout=0.0 is its setting), the new ones trained, the tables show the
+    variants with 95 % intervals; bad grids are refused before any work."""
+    copy = tmp_path / "out"
+    shutil.copytree(smoke, copy)
+    kept = {p: p.stat().st_mtime_ns for p in (copy / "eval").glob("depth_n*_s0/summary.json")}
+    args = ["sweep", "--preset", "smoke", "--nets", "depth", "--sizes", "6", "--seeds", "0-1",
+            "--set", "dropout=0,0.5", "--out", str(copy)]
+    assert main(args) == 0
+    assert all(p.stat().st_mtime_ns == t for p, t in kept.items())
+    models = sorted(p.name for p in (copy / "models").iterdir())
+    assert {"depth_n6_s1", "depth_n6_s0_dropout0.5", "depth_n6_s1_dropout0.5"} <= set(models)
+    assert not [m for m in models if "dropout0.0" in m]
+    with (copy / "table1.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["variant"], r["runs"], r["seeds DQN"]) for r in rows] == [("dropout=0.0", "6", "2"),
+                                                                        ("dropout=0.5", "6", "2")]
+    number = re.compile(r"^(-?\d+\.\d+) \((\d+\.\d+)\) \[(-?\d+\.\d+), (-?\d+\.\d+)\]$")
+    for row in rows:
+        mean, _, low, high = map(float, number.match(row["distance DQN"]).groups())
+        assert low <= mean <= high
+    assert "distance CQN" not in (copy / "table1.md").read_text()
+
+    for bad, named in (
+        (["--seeds", "0-x"], "0-x"),
+        (["--set", "seed=1,2"], "seed"),
+        (["--set", "dropout=0.5,2"], "2"),
+        (["--set", "nothing=1"], "nothing"),
+        (["--sizes", "7"], "7"),
+        (["--nets", "depth,lidar"], "lidar"),
+    ):
+        capsys.readouterr()
+        out = tmp_path / "bad"
+        assert main(["sweep", "--preset", "smoke", *bad, "--out", str(out)]) == 2, bad
+        assert named in capsys.readouterr().err and not out.exists(), bad
+
+
+def test_intervals_are_student_t_over_seeds():
+    values = [1.0, 2.0, 3.0]  # mean 2, sample std 1, t(0.975, 2 dof) = 4.303
+    low, high = interval(values)
+    assert (low, high) == pytest.approx((2 - 4.3027 / 3**0.5, 2 + 4.3027 / 3**0.5), abs=1e-3)
+    assert interval([5.0]) is None
 
 
 def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
@@ -93,7 +133,8 @@ def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
     assert "cuda:7" in capsys.readouterr().err  # no GPU here, or not 8 of them
     assert not (tmp_path / "x").exists()
     assert main(["reproduce", "--preset", "quick", "--out", str(smoke)]) == 2
-    assert "smoke" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "'smoke'" in err and "runs 6 there, 200 here" in err
 
 
 def test_paper_stages_finish_seed_0_for_every_size_first(tmp_path):

@@ -19,6 +19,7 @@ VERBS: dict[str, str] = {
     "train": "train",
     "evaluate": "evaluate",
     "reproduce": "reproduce",
+    "sweep": "sweep",
     "probe": "probe",
     "export": "export",
     "bag": "bag",

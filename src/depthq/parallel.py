@@ -1,16 +1,22 @@
-"""Where the parallel work of collection and evaluation runs: local processes or a Ray cluster.
+"""Where parallel work runs: processes on this machine, or a Ray cluster.
 
-Both jobs are a list of independent tasks (a run to collect, a canyon to drive) served by workers
-that keep an expensive state between tasks (a MuJoCo world with its EGL context, a loaded policy).
-`Executor.run` takes a picklable `make_worker()` that builds that state and returns a callable
+Two shapes of work:
+
+`Executor.run`: many small independent tasks (a run to collect, a canyon to drive) served by
+workers that keep an expensive state between tasks (a MuJoCo world with its EGL context, a loaded
+policy). It takes a picklable `make_worker()` that builds that state and returns a callable
 `worker(task) -> result` with a `close()`, and yields `(position, result)` as tasks finish:
 
 - `local`: `workers` spawned processes on this machine (spawned: EGL contexts do not survive a fork);
 - `ray`: `workers` Ray actors of one CPU each, on the cluster at `address` (None: a Ray started on
   this machine); an actor whose node dies is restarted elsewhere and its task retried.
 
-A task's result depends on the task alone (each carries its own seeds), so the results are the
-same whatever the executor and the number of workers or nodes; callers order them by position.
+`Executor.run_jobs`: a pipeline's steps (`Job`s: collect, train a model, evaluate it). Locally
+they run here one after the other; on Ray, each `remote` job is a Ray task declaring its CPUs
+(and GPU), started once the jobs it reads from are done, retried on another node if its node dies.
+
+A task's result depends on the task alone (each carries its own seeds, and a job its own thread
+count), so the results are the same whatever the executor and the number of workers or nodes.
 """
 
 from __future__ import annotations
@@ -18,9 +24,11 @@ from __future__ import annotations
 import importlib.util
 import os
 import queue
+import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 from depthq.errors import ConfigError
@@ -66,6 +74,39 @@ class Executor:
         if self.kind == "ray":
             return _run_ray(make_worker, tasks, workers, what, self.address)
         return _run_local(make_worker, tasks, workers, what)
+
+    def run_jobs(self, jobs: Sequence[Job]) -> Iterator[tuple[str, float]]:
+        """Run `jobs` (in an order where each comes after those it reads from); yields each job's
+        name and measured seconds as it finishes."""
+        if self.kind == "ray":
+            return _run_jobs_ray(jobs, self.address)
+        return ((job.name, _timed(job.run)) for job in jobs)
+
+    def check_shared(self, folder: Path) -> None:
+        """Fail with a clear message unless every node of the cluster sees and can write `folder`."""
+        if self.kind == "ray":
+            _check_shared_ray(Path(folder).resolve(), self.address)
+
+
+@dataclass(frozen=True)
+class Job:
+    """A step of a pipeline. `remote`: may run on any node (it reads and writes only shared
+    storage), with `cpus` CPUs and `gpus` GPUs reserved; otherwise it runs on the driver, after
+    every remote job before it. `after`: the jobs whose outputs it reads."""
+
+    name: str
+    run: Callable[[], object]
+    after: tuple[str, ...] = ()
+    remote: bool = False
+    cpus: int = 1
+    gpus: float = 0.0
+
+
+def _timed(run: Callable[[], object], *_inputs: Any) -> float:
+    """Seconds `run()` took; `_inputs` are the results of the jobs it waited for (unused)."""
+    start = time.perf_counter()
+    run()
+    return round(time.perf_counter() - start, 1)
 
 
 def _serve(make_worker: Callable[[], Worker], tasks, results) -> None:
@@ -130,15 +171,22 @@ class _RayWorker:
         return position, self.worker(task)
 
 
-def _run_ray(make_worker, tasks, workers: int, what: str, address: str | None) -> Iterator[tuple[int, Any]]:
+def _ray(address: str | None):
+    """The `ray` module, connected to the cluster at `address` (or one started here)."""
     import ray
-    from ray.util import ActorPool
 
     if not ray.is_initialized():
         # Workers render offscreen like this process; MUJOCO_GL must be set before mujoco is imported.
         env = {"MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
         ray.init(address=address, runtime_env={"env_vars": env}, include_dashboard=False,
                  log_to_driver=False, configure_logging=False)
+    return ray
+
+
+def _run_ray(make_worker, tasks, workers: int, what: str, address: str | None) -> Iterator[tuple[int, Any]]:
+    from ray.util import ActorPool
+
+    ray = _ray(address)
     actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_RayWorker)
     actors = [actor.remote(make_worker) for _ in range(workers)]
     try:
@@ -148,6 +196,80 @@ def _run_ray(make_worker, tasks, workers: int, what: str, address: str | None) -
     finally:
         for a in actors:
             ray.kill(a)
+
+
+def _run_jobs_ray(jobs: Sequence[Job], address: str | None) -> Iterator[tuple[str, float]]:
+    ray = _ray(address)
+    timed = ray.remote(max_retries=-1)(_timed)  # retried when its node dies; an error is not retried
+    pending: dict[Any, str] = {}  # Ray object → job name
+    refs: dict[str, Any] = {}
+
+    def finished(wait_all: bool) -> Iterator[tuple[str, float]]:
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=None if wait_all else 0)
+            if not ready:
+                return
+            name = pending.pop(ready[0])
+            try:
+                yield name, ray.get(ready[0])
+            except ray.exceptions.RayError as err:
+                raise RuntimeError(f"job {name!r} failed on Ray: {err}") from err
+
+    for job in jobs:
+        if not job.remote:
+            yield from finished(wait_all=True)
+            yield job.name, _timed(job.run)
+            continue
+        inputs = [refs[name] for name in job.after if name in refs]
+        options = {"num_cpus": job.cpus, "num_gpus": job.gpus, "name": job.name}
+        refs[job.name] = timed.options(**options).remote(job.run, *inputs)
+        pending[refs[job.name]] = job.name
+        yield from finished(wait_all=False)
+    yield from finished(wait_all=True)
+
+
+def _probe_shared(token: str, node: str) -> str:
+    """On one node: '' if it sees the driver's `token` file and can write next to it, else why not."""
+    if not Path(token).is_file():
+        return f"does not see {Path(token).parent}"
+    try:
+        Path(f"{token}-{node}").write_text(node)
+    except OSError as err:
+        return f"cannot write to {Path(token).parent}: {err}"
+    return ""
+
+
+def _check_shared_ray(folder: Path, address: str | None) -> None:
+    """From each alive node: `folder` holds the driver's token file, and a file that node writes
+    there is seen here."""
+    import secrets
+
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    ray = _ray(address)
+    folder.mkdir(parents=True, exist_ok=True)
+    token = folder / f".shared-check-{secrets.token_hex(4)}"
+    token.write_text("driver")
+    nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]
+    probe = ray.remote(num_cpus=0)(_probe_shared)
+    answers = [
+        probe.options(scheduling_strategy=NodeAffinitySchedulingStrategy(n["NodeID"], soft=False)).remote(
+            str(token), n["NodeID"])
+        for n in nodes
+    ]
+    try:
+        for node, problem in zip(nodes, ray.get(answers), strict=True):
+            written = Path(f"{token}-{node['NodeID']}")
+            if not problem and not written.is_file():
+                problem = f"wrote {written}, which this machine does not see"
+            if problem:
+                raise ConfigError(
+                    f"Ray node {node['NodeManagerAddress']} {problem}; the output folder must be on "
+                    "storage that every node mounts at the same path (e.g. NFS)"
+                )
+            written.unlink()
+    finally:
+        token.unlink(missing_ok=True)
 
 
 LOCAL = Executor()  # the default: processes on this machine

@@ -11,8 +11,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
-from depthq.report.layout import model_name
-from depthq.report.presets import Preset
+from depthq.report.sweep import Sweep
 from depthq.report.tables import (
     csv_text,
     markdown,
@@ -23,14 +22,15 @@ from depthq.report.tables import (
 )
 
 
-def best_depth_eval(out: Path, preset: Preset) -> Path | None:
+def best_depth_eval(out: Path, sweep: Sweep) -> Path | None:
     """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4 and its video)."""
     best, best_distance = None, -1.0
-    for n in preset.subsets:
-        for s in preset.seeds:
-            path = out / "eval" / model_name("depth", n, s) / "summary.json"
-            if path.is_file() and (d := read_json(path)["summary"]["distance_mean"]) > best_distance:
-                best, best_distance = path.parent, d
+    for model in sweep.models():
+        path = out / "eval" / model.name / "summary.json"
+        if model.net != "depth" or not path.is_file():
+            continue
+        if (distance := read_json(path)["summary"]["distance_mean"]) > best_distance:
+            best, best_distance = path.parent, distance
     return best
 
 
@@ -39,15 +39,16 @@ def _trunks(out: Path) -> list[str]:
     return sorted({read_json(p)["trunk"] for p in (out / "models").glob("*/config.json")})
 
 
-def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> None:
-    t1 = table1_rows(out, preset.subsets, preset.seeds)
-    seeds = per_seed_rows(out, preset.subsets, preset.seeds)
+def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> None:
+    t1 = table1_rows(out, sweep)
+    seeds = per_seed_rows(out, sweep)
     refs = reference_rows(out)
-    stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=preset.subsets))
-    t2 = table2_rows(stats, preset.subsets)
+    stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=sweep.subsets))
+    t2 = table2_rows(stats, sweep.subsets)
     note = (
-        f"mean (std) over the seeds evaluated so far (columns 'seeds'; the preset has {len(preset.seeds)}); "
-        f"{preset.canyons} canyons, {preset.decision_hz:g} decisions/s, {preset.time_limit_s:.0f} s "
+        f"mean (std) over the seeds evaluated so far (columns 'seeds'; the sweep has {len(sweep.seeds)}), "
+        "and for distance and success the 95 % Student-t interval of that mean [low, high]; "
+        f"{sweep.canyons} canyons, {sweep.decision_hz:g} decisions/s, {sweep.time_limit_s:.0f} s "
         f"per run; success = more than 15 m from the spawn. Trunk: {', '.join(_trunks(out)) or '–'} "
         f"(see the deviations) instead of the paper's MobileNet-v1-0.25.\n"
     )
@@ -61,9 +62,9 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     )
     atomic_write_bytes(out / "table1.csv", csv_text(t1).encode())
     atomic_write_bytes(out / "table2.md", ("# Table II\n\n" + markdown(t2)).encode())
-    plot_fig5(out, preset.subsets, preset.seeds, out / "fig5_convergence.png")
-    plot_success_vs_runs(out, preset.subsets, preset.seeds, out / "success_vs_runs.png")
-    best = best_depth_eval(out, preset)
+    plot_fig5(out, sweep, out / "fig5_convergence.png")
+    plot_success_vs_runs(out, sweep, out / "success_vs_runs.png")
+    best = best_depth_eval(out, sweep)
     for name, copy in (("fig4_qualitative.png", "fig4_qualitative.png"), ("video.mp4", "fig4_video.mp4")):
         if best is not None and (best / name).is_file():
             shutil.copyfile(best / name, out / copy)
@@ -73,7 +74,7 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
     if best is not None:
         figures.append((best / "trajectories.png", f"trajectories: {best.name} (best Depth-Q-Net)"))
     html_text = page.render(
-        f"depthq reproduction — preset {preset.name}",
+        f"depthq reproduction — {sweep.name}",
         [
             (
                 "Table I",
@@ -105,7 +106,7 @@ def build_report(out: Path, preset: Preset, stage_seconds: dict[str, float]) -> 
                 "Configuration",
                 page.pre(
                     {
-                        "preset": to_dict(preset),
+                        "sweep": to_dict(sweep),
                         "provenance": provenance(),
                         "dataset": {k: stats[k] for k in ("collected", "usable", "frames", "kb_per_frame")},
                     }

@@ -11,8 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.report.layout import model_name
-from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results
+from depthq.report.sweep import Model, Sweep, variant_label
+from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results, interval, per_seed
 
 
 def _read_metrics(path: Path) -> dict[str, np.ndarray]:
@@ -21,19 +21,21 @@ def _read_metrics(path: Path) -> dict[str, np.ndarray]:
     return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]} if rows else {}
 
 
-def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path: Path) -> None:
+def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
     """Training and validation loss per epoch for each subset size (top), and the standard deviation
     of the per-sample validation loss over a batch (bottom: the paper's over-fitting signal), each
-    averaged over seeds. The spread gets its own row: drawn as bands, six sizes hide each other."""
-    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
-    colours = plt.cm.viridis(np.linspace(0, 0.9, len(subsets)))
-    for column, net in enumerate(("depth", "coll")):
+    averaged over seeds, for the sweep's first variant. The spread gets its own row: drawn as bands,
+    six sizes hide each other."""
+    fig, axes = plt.subplots(2, len(sweep.nets), figsize=(6 * len(sweep.nets), 7), sharex=True, squeeze=False)
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(sweep.subsets)))
+    first = sweep.variants()[0]
+    for column, net in enumerate(sweep.nets):
         loss_ax, std_ax = axes[0, column], axes[1, column]
-        for colour, n in zip(colours, subsets, strict=True):
+        for colour, n in zip(colours, sweep.subsets, strict=True):
             logs = [
                 _read_metrics(p)
-                for s in seeds
-                if (p := out / "models" / model_name(net, n, s) / "metrics.csv").is_file()
+                for s in sweep.seeds
+                if (p := out / "models" / Model(net, n, s, first).name / "metrics.csv").is_file()
             ]
             logs = [m for m in logs if m]
             if not logs:
@@ -47,7 +49,7 @@ def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path:
             loss_ax.plot(epoch, val, "-", color=colour, lw=1.5, label=f"{n} runs, validation")
             std_ax.plot(epoch, std, "-", color=colour, lw=1.5, label=f"{n} runs")
         unit = "L1 on valid bins (m)" if net == "depth" else "cross-entropy"
-        loss_ax.set_title(f"{NET_LABELS[net]}: {unit}")
+        loss_ax.set_title(f"{NET_LABELS[net]}: {unit}" + (f" ({variant_label(first)})" if first else ""))
         loss_ax.set_ylabel("loss")
         loss_ax.legend(fontsize=7, ncol=2)
         std_ax.set_title(f"{NET_LABELS[net]}: std of the validation loss over a batch")
@@ -59,30 +61,42 @@ def plot_fig5(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path:
     plt.close(fig)
 
 
-def plot_success_vs_runs(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...], path: Path) -> None:
-    """The paper's claim at a glance: successes out of the evaluation canyons against training runs."""
-    results = collect_results(out, subsets, seeds)
-    fig, ax = plt.subplots(figsize=(6, 4))
+def plot_success_vs_runs(out: Path, sweep: Sweep, path: Path) -> None:
+    """The paper's claim at a glance: successes out of the evaluation canyons against training runs,
+    mean over seeds with its 95 % interval, one line per network and variant."""
+    results = collect_results(out, sweep)
+    variants = sweep.variants()
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    styles = ("o-", "s-", "^-", "v-", "D-", "P-")
     for net, colour in (("depth", "tab:blue"), ("coll", "tab:orange")):
-        xs, mean, std = [], [], []
-        for n in subsets:
-            succ = [r["summary"]["successes"] for r in results[f"{net}_{n}"]]
-            if succ:
-                xs.append(n)
-                mean.append(np.mean(succ))
-                std.append(np.std(succ))
-        if xs:
-            ax.errorbar(xs, mean, yerr=std, marker="o", capsize=3, color=colour, label=NET_LABELS[net])
-        paper = [(n, PAPER_TABLE1[n][net][1]) for n in subsets if n in PAPER_TABLE1]
+        if net not in sweep.nets:
+            continue
+        for k, variant in enumerate(variants):
+            xs, mean, low, high = [], [], [], []
+            for n in sweep.subsets:
+                succ = [r["summary"]["successes"] for r in per_seed(results, net, n, variant)]
+                if succ:
+                    ci = interval(succ) or (np.mean(succ), np.mean(succ))
+                    xs.append(n)
+                    mean.append(np.mean(succ))
+                    low.append(np.mean(succ) - ci[0])
+                    high.append(ci[1] - np.mean(succ))
+            if xs:
+                label = NET_LABELS[net] + (f", {variant_label(variant)}" if len(variants) > 1 else "")
+                ax.errorbar(xs, mean, yerr=[low, high], fmt=styles[k % len(styles)], capsize=3, color=colour,
+                            alpha=1.0 - 0.5 * k / len(variants), label=label)
+        paper = [(n, PAPER_TABLE1[n][net][1]) for n in sweep.subsets if n in PAPER_TABLE1]
         if paper:
             label = f"{NET_LABELS[net]}, paper"
             ax.plot(*zip(*paper, strict=True), "--", color=colour, alpha=0.6, label=label)
+    seeds = len(sweep.seeds)
+    ax.set_title(f"mean over {seeds} seeds, bars: 95 % interval" if seeds > 1 else "one seed")
     ax.set_xlabel("training runs")
     ax.set_ylabel("successes (distance > 15 m)")
     ax.set_xscale("log")
-    ax.set_xticks(list(subsets), [str(n) for n in subsets])
+    ax.set_xticks(list(sweep.subsets), [str(n) for n in sweep.subsets])
     ax.minorticks_off()  # the sizes themselves, not 4×10¹ …
-    ax.legend()
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)

@@ -1,7 +1,8 @@
 """Names inside a reproduction folder, shared by the stages that write it and the report that reads it.
 
-    OUT/models/<net>_n<N>_s<S>/   one checkpoint per (network, training runs, seed)
-    OUT/eval/<net>_n<N>_s<S>/     its evaluation (and OUT/eval/heuristic, OUT/eval/ou)
+    OUT/models/<net>_n<N>_s<S>[_<field><value>…]/   one checkpoint per (network, training runs, seed,
+                                                    variant of a sweep's grid, e.g. _dropout0.5)
+    OUT/eval/<same name>/                           its evaluation (and OUT/eval/heuristic, OUT/eval/ou)
 
 The data flow is one way: `reproduce` runs the stages, then `build` turns their files into tables,
 figures and the report; neither the report nor its tables import the stage runner.
@@ -9,9 +10,11 @@ figures and the report; neither the report nor its tables import the stage runne
 
 from __future__ import annotations
 
+from typing import Any
+
 NETS = ("depth", "coll")
 
 
-def model_name(net: str, runs: int, seed: int) -> str:
-    """e.g. depth_n200_s1."""
-    return f"{net}_n{runs}_s{seed}"
+def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:
+    """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant."""
+    return f"{net}_n{runs}_s{seed}" + "".join(f"_{k}{v}" for k, v in variant)

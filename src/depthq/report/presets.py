@@ -1,42 +1,17 @@
-"""Reproduction presets: the same pipeline at three sizes."""
+"""Reproduction presets: the same sweep at three sizes (and the paper's at the nominal rate)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
-from depthq.sim.world import DEFAULT_DECISION_HZ, NOMINAL_DECISION_HZ
+from depthq.report.sweep import Sweep
+from depthq.sim.world import NOMINAL_DECISION_HZ
 
-
-@dataclass(frozen=True)
-class Preset:
-    """What `depthq reproduce` collects, trains and evaluates."""
-
-    name: str
-    runs: int  # usable training runs collected (the largest subset)
-    val_runs: int
-    max_steps: int  # collection step limit per run
-    subsets: tuple[int, ...]  # nested training-set sizes (first n runs)
-    seeds: tuple[int, ...]  # training seeds per (model, size)
-    epochs: int | None  # None: the trainer's default budget
-    train_batches: int
-    val_batches: int
-    canyons: str  # evaluation canyon set
-    time_limit_s: float
-    workers: int = 2
-    decision_hz: float = DEFAULT_DECISION_HZ  # collection and evaluation: one decision per camera frame
-
-    def __post_init__(self) -> None:
-        if not self.subsets or max(self.subsets) > self.runs:
-            raise ConfigError(f"preset {self.name}: subsets {self.subsets} must fit in {self.runs} runs")
-        if not self.seeds:
-            raise ConfigError(f"preset {self.name}: needs at least one seed")
-
-
-PRESETS: dict[str, Preset] = {
+PRESETS: dict[str, Sweep] = {
     # A few minutes end to end; the test suite runs it.
-    "smoke": Preset(
+    "smoke": Sweep(
         "smoke",
         runs=6,
         val_runs=2,
@@ -50,7 +25,7 @@ PRESETS: dict[str, Preset] = {
         time_limit_s=5.0,
     ),
     # Same pipeline, fewer sizes and seeds: under 45 minutes on 2 CPU cores.
-    "quick": Preset(
+    "quick": Sweep(
         "quick",
         runs=200,
         val_runs=20,
@@ -64,7 +39,7 @@ PRESETS: dict[str, Preset] = {
         time_limit_s=45.0,
     ),
     # The paper's Table I: 6 dataset sizes × 3 seeds × 2 networks, 20 canyons each.
-    "paper": Preset(
+    "paper": Sweep(
         "paper",
         runs=900,
         val_runs=90,
@@ -82,7 +57,7 @@ PRESETS: dict[str, Preset] = {
 PRESETS["nominal"] = replace(PRESETS["paper"], name="nominal", decision_hz=NOMINAL_DECISION_HZ)
 
 
-def get_preset(name: str) -> Preset:
+def get_preset(name: str) -> Sweep:
     if name not in PRESETS:
         raise ConfigError(f"unknown preset {name!r}; expected one of {sorted(PRESETS)}")
     return PRESETS[name]

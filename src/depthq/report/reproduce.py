@@ -1,10 +1,12 @@
-"""`depthq reproduce`: collect → train every (network, subset, seed) → evaluate → tables, figures, report.
+"""`depthq reproduce` and `depthq sweep`: collect → train every model of the sweep → evaluate it →
+tables, figures, report.
 
 Output folder:
 
-    OUT/reproduce.json            the preset and package version this folder belongs to
+    OUT/reproduce.json            the sweep (a preset, or a widened one) and package version of the folder
     OUT/data/                     the dataset (see README "Dataset on disk") and its feature cache
-    OUT/models/<net>_n<N>_s<S>/   checkpoints, e.g. models/depth_n200_s1 (see depthq.train.checkpoint)
+    OUT/models/<model>/           checkpoints, e.g. models/depth_n200_s1 (see depthq.report.layout and
+                                  depthq.train.checkpoint)
     OUT/eval/<name>/              evaluations: summary.json, runs.csv, trajectories (+ heuristic, ou)
     OUT/stages.json               measured seconds of every stage
     OUT/table1.md|csv, table2.md, fig4_qualitative.png, fig5_convergence.png, success_vs_runs.png,
@@ -12,15 +14,16 @@ Output folder:
 
 Every stage is skipped when its output is complete (a dataset with all its runs, a checkpoint at
 its last epoch, an evaluation with its summary.json) and redone otherwise, so running the same
-command again after an interruption resumes where it stopped.
+command again after an interruption resumes where it stopped. The stages are `depthq.parallel`
+jobs: here one after the other, or on a Ray cluster one task per training and per evaluation.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,175 +31,196 @@ from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict, write_json
 from depthq.errors import ConfigError
-from depthq.parallel import LOCAL, Executor
+from depthq.parallel import LOCAL, Executor, Job, cores
 from depthq.report.build import best_depth_eval, build_report
-from depthq.report.layout import NETS, model_name
-from depthq.report.presets import Preset, get_preset
+from depthq.report.presets import get_preset
+from depthq.report.sweep import Sweep
 
 if TYPE_CHECKING:
+    from depthq.data.collect import CollectConfig
     from depthq.evaluate.evaluate import EvalConfig
+    from depthq.train.config import TrainConfig
 
 
 @dataclass(frozen=True)
 class Stage:
-    name: str
+    """A job of the pipeline and how to tell that its output is already complete."""
+
     done: Callable[[], bool]
-    run: Callable[[], object]
+    job: Job
+
+    @property
+    def name(self) -> str:
+        return self.job.name
 
 
 def _eval_done(folder: Path) -> bool:
     return (folder / "summary.json").is_file()
 
 
-def build_stages(preset: Preset, out: Path, device: str = "cpu", executor: Executor = LOCAL) -> list[Stage]:
-    """The pipeline as an ordered list of resumable stages; networks run on `device`, collection
-    and evaluation tasks on `executor` (training runs here, one model after the other)."""
-    from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
-    from depthq.data.manifest import Dataset
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
-    from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE
+def _trained(config: TrainConfig, folder: Path) -> bool:
     from depthq.train.checkpoint import saved_epoch
-    from depthq.train.config import TrainConfig
-    from depthq.train.features import features_ready, load_features
+
+    return saved_epoch(folder) >= config.epochs
+
+
+def _features_ready(data: Path, collect_config: CollectConfig, frozen: list[tuple[str, int]]) -> bool:
+    from depthq.data.collect import collection_complete
+    from depthq.data.manifest import Dataset
+    from depthq.train.features import features_ready
+
+    if not collection_complete(data, collect_config):
+        return False  # decided before any stage runs: the collection may be still to come
+    return all(features_ready(Dataset.open(data), trunk, size) for trunk, size in frozen)
+
+
+def _features(data: Path, frozen: list[tuple[str, int]], device: str) -> None:
+    """The cached features of every frozen trunk the sweep trains on, computed before any training
+    reads them (trainings run in parallel on Ray)."""
+    from depthq.data.manifest import Dataset
+    from depthq.train.features import load_features
+
+    for trunk, size in frozen:
+        load_features(Dataset.open(data), trunk, size, device=device)
+
+
+def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executor = LOCAL) -> list[Stage]:
+    """The pipeline as an ordered list of resumable stages. Networks run on `device`. Collection and
+    the reference policies' evaluations run on `executor` from here; on Ray, every training and
+    every model's evaluation is a task of its own (`depthq.parallel.Job`)."""
+    from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.nets.trunk import TRUNKS
     from depthq.train.trainer import train
 
     data = out / "data"
     collect_config = CollectConfig(
-        runs=preset.runs,
-        val_runs=preset.val_runs,
-        max_steps=preset.max_steps,
-        env=exploration_env(preset.decision_hz),
+        runs=sweep.runs,
+        val_runs=sweep.val_runs,
+        max_steps=sweep.max_steps,
+        env=exploration_env(sweep.decision_hz),
     )
     eval_config = EvalConfig(
-        canyons=parse_canyon_set(preset.canyons),
-        time_limit_s=preset.time_limit_s,
-        decision_hz=preset.decision_hz,
+        canyons=parse_canyon_set(sweep.canyons),
+        time_limit_s=sweep.time_limit_s,
+        decision_hz=sweep.decision_hz,
     )
+    models = sweep.models()
+    configs = {m: sweep.train_config(m, str(data)) for m in models}
+    frozen = sorted({(c.trunk, c.input_size) for c in configs.values() if TRUNKS[c.trunk].frozen})
     stages = [
         Stage(
-            "collect",
-            lambda: collection_complete(data, collect_config),
-            lambda: collect(data, collect_config, seed=0, workers=preset.workers, executor=executor),
+            partial(collection_complete, data, collect_config),
+            Job("collect", partial(collect, data, collect_config, 0, sweep.workers, executor=executor)),
         ),
         Stage(
-            "features",
-            lambda: features_ready(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE),
-            lambda: load_features(Dataset.open(data), DEFAULT_TRUNK, INPUT_SIZE, device=device),
+            partial(_features_ready, data, collect_config, frozen),
+            Job("features", partial(_features, data, frozen, device)),
         ),
     ]
     for ref in ("heuristic", "ou"):
         folder = out / "eval" / ref
-        stages.append(
-            Stage(
-                f"evaluate {ref}",
-                lambda f=folder: _eval_done(f),
-                lambda r=ref, f=folder: evaluate(
-                    r, f, eval_config, preset.workers, video=False, executor=executor
-                ),
-            )
+        drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
+        stages.append(Stage(partial(_eval_done, folder), Job(f"evaluate {ref}", drive)))
+    # On Ray a training reserves as many CPUs as it uses threads: this machine's count, whichever
+    # node runs it, because a different count sums floats in another order (other bytes).
+    remote, threads = executor.kind == "ray", cores()
+    gpus = 1.0 if device.startswith("cuda") else 0.0
+    for model in models:
+        config, ckpt, ev = configs[model], out / "models" / model.name, out / "eval" / model.name
+        fit = partial(train, config, ckpt, progress=not remote, device=device, threads=threads)
+        # On Ray an evaluation is one task of `workers` CPUs that drives its canyons in as many local
+        # processes: every model job then takes the CPUs a training takes, and none is left idle.
+        drive = partial(
+            evaluate, str(ckpt), ev, eval_config, sweep.workers, progress=not remote, device=device,
+            video=False, executor=LOCAL,
         )
-    extra = {} if preset.epochs is None else {"epochs": preset.epochs}
-    # Seed-major: an interrupted or still-running `paper` already holds a whole table for seed 0.
-    for seed in preset.seeds:
-        for n in preset.subsets:
-            for net in NETS:
-                name = model_name(net, n, seed)
-                config = TrainConfig(
-                    model=net,
-                    data=str(data),
-                    runs=n,
-                    seed=seed,
-                    train_batches=preset.train_batches,
-                    val_batches=preset.val_batches,
-                    **extra,
-                )
-                ckpt, ev = out / "models" / name, out / "eval" / name
-                stages.append(
-                    Stage(
-                        f"train {name}",
-                        lambda c=config, f=ckpt: saved_epoch(f) >= c.epochs,
-                        lambda c=config, f=ckpt: train(c, f, device=device),
-                    )
-                )
-                stages.append(
-                    Stage(
-                        f"evaluate {name}",
-                        lambda f=ev: _eval_done(f),
-                        lambda f=ev, c=ckpt: evaluate(
-                            str(c), f, eval_config, preset.workers, device, video=False, executor=executor
-                        ),
-                    )
-                )
+        stages += [
+            Stage(
+                partial(_trained, config, ckpt),
+                Job(f"train {model.name}", fit, ("features",), remote, threads, gpus),
+            ),
+            Stage(
+                partial(_eval_done, ev),
+                Job(f"evaluate {model.name}", drive, (f"train {model.name}",), remote, sweep.workers, gpus),
+            ),
+        ]
     # One video, of the model the report shows: its first canyon driven again (the same run).
     stages.append(
         Stage(
-            "video of the best Depth-Q-Net",
-            lambda: (best := best_depth_eval(out, preset)) is None or (best / "video.mp4").is_file(),
-            lambda: _video_of_best(out, preset, eval_config, device),
+            lambda: (best := best_depth_eval(out, sweep)) is not None and (best / "video.mp4").is_file(),
+            Job("video of the best Depth-Q-Net", lambda: _video_of_best(out, sweep, eval_config, device)),
         )
     )
     return stages
 
 
-def _video_of_best(out: Path, preset: Preset, eval_config: EvalConfig, device: str) -> None:
+def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str) -> None:
     from depthq.evaluate.evaluate import evaluate
 
-    best = best_depth_eval(out, preset)
+    best = best_depth_eval(out, sweep)
+    if best is None or (best / "video.mp4").is_file():
+        return
     first = out / "video" / best.name
     config = replace(eval_config, canyons=eval_config.canyons[:1])
     evaluate(str(out / "models" / best.name), first, config, workers=1, progress=False, device=device)
     atomic_write_bytes(best / "video.mp4", (first / "video.mp4").read_bytes())
 
 
-def _claim(out: Path, preset: Preset) -> None:
-    """Refuse a folder holding another preset's results; mark a new one as this preset's."""
+def _claim(out: Path, sweep: Sweep) -> None:
+    """Refuse a folder holding results of another setup; mark a new one as this sweep's. The grid
+    (networks, sizes, seeds, variants) may differ: models already there are reused."""
     marker = out / "reproduce.json"
     if marker.is_file():
-        held = read_json(marker).get("preset", {})
-        if held != json.loads(json.dumps(to_dict(preset))):
+        held = read_json(marker)
+        held = held.get("sweep", held.get("preset", {}))  # folders written before sweeps say "preset"
+        ours = sweep.setup()
+        differ = [f"{k} {held.get(k)!r} there, {v!r} here" for k, v in ours.items() if held.get(k) != v]
+        if differ:
             raise ConfigError(
-                f"{out} holds results of preset {held.get('name')!r} with another configuration; "
-                f"use another --out for preset {preset.name!r}"
+                f"{out} holds results of {held.get('name')!r} with another setup ({'; '.join(differ)}); "
+                f"use another --out for {sweep.name!r}"
             )
     elif out.exists() and any(out.iterdir()):
         raise ConfigError(f"{out} exists and is not a depthq reproduce folder; use another --out")
-    write_json(marker, {"preset": to_dict(preset), "provenance": provenance()})
+    write_json(marker, {"sweep": json.loads(json.dumps(to_dict(sweep))), "provenance": provenance()})
 
 
-def reproduce(
-    preset_name: str, out: Path, progress: bool = True, device: str = "auto", executor: Executor = LOCAL
+def run_sweep(
+    sweep: Sweep, out: Path, progress: bool = True, device: str = "auto", executor: Executor = LOCAL
 ) -> dict[str, float]:
-    """Run (or resume) the whole pipeline, networks on `device`, collection and evaluation on
-    `executor`; returns the measured seconds per stage."""
+    """Run (or resume) every stage of `sweep` into `out`, networks on `device`, the jobs on
+    `executor`, then write the tables, figures and report; returns the measured seconds per stage."""
     from depthq.nets.device import resolve_device
 
     where = str(resolve_device(device))  # a device torch cannot use fails here, before any work
-    preset = get_preset(preset_name)
-    out = Path(out)
-    _claim(out, preset)
+    out = Path(out).resolve()  # the same path on every node of a cluster
+    _claim(out, sweep)
+    executor.check_shared(out)
     times_path = out / "stages.json"
     times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
-    stages = build_stages(preset, out, where, executor)
+    stages = build_stages(sweep, out, where, executor)
+    todo = [stage.job for stage in stages if not stage.done()]
     with tqdm(
         total=len(stages),
-        desc=f"reproduce {preset.name}",
+        initial=len(stages) - len(todo),
+        desc=sweep.name,
         unit="stage",
         position=0,
         disable=not progress,
         dynamic_ncols=True,
     ) as bar:
-        for stage in stages:
-            if stage.done():
-                bar.update(1)
-                continue
-            bar.set_postfix_str(stage.name)
-            start = time.perf_counter()
-            stage.run()
-            times[stage.name] = round(time.perf_counter() - start, 1)
+        for name, seconds in executor.run_jobs(todo):
+            times[name] = seconds
             write_json(times_path, times)
+            bar.set_postfix_str(f"done: {name}")
             bar.update(1)
-    start = time.perf_counter()
-    build_report(out, preset, times)
-    times["report"] = round(time.perf_counter() - start, 1)
-    write_json(times_path, times)
+    build_report(out, sweep, times)
     return times
+
+
+def reproduce(
+    preset_name: str, out: Path, progress: bool = True, device: str = "auto", executor: Executor = LOCAL
+) -> dict[str, float]:
+    """`run_sweep` of a preset (`depthq.report.presets`)."""
+    return run_sweep(get_preset(preset_name), out, progress, device, executor)

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from depthq.configio import read_json
-from depthq.report.layout import NETS, model_name
+from depthq.report.sweep import Model, Sweep, Variant, variant_label
 
 NET_LABELS = {"coll": "CQN", "depth": "DQN"}
 # The paper's Table I (mean over its 3 seeds), for comparison only: runs → net → (distance m, successes /20).
@@ -24,24 +24,45 @@ PAPER_TABLE1: dict[int, dict[str, tuple[float, float]]] = {
 }
 
 
-def _mean_std(values: list[float], fmt: str) -> str:
+def interval(values: list[float]) -> tuple[float, float] | None:
+    """The 95 % Student-t interval of the mean over seeds (None for one seed)."""
+    if len(values) < 2:
+        return None
+    from scipy import stats
+
+    half = stats.t.ppf(0.975, len(values) - 1) * np.std(values, ddof=1) / np.sqrt(len(values))
+    return float(np.mean(values) - half), float(np.mean(values) + half)
+
+
+def _cell(values: list[float], fmt: str, with_interval: bool = False) -> str:
+    """'mean (std)' over seeds, std with n − 1; `with_interval`: then '[low, high]' (95 %)."""
     if not values:
         return "–"
-    return f"{np.mean(values):{fmt}} ({np.std(values):{fmt}})"
+    std = f"{np.std(values, ddof=1):{fmt}}" if len(values) > 1 else "–"
+    text = f"{np.mean(values):{fmt}} ({std})"
+    if with_interval and (ci := interval(values)) is not None:
+        text += f" [{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
+    return text
 
 
-def collect_results(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> dict[str, Any]:
-    """Per (net, n): the per-seed summaries of the evaluations that exist."""
-    results: dict[str, Any] = {}
-    for n in subsets:
-        for net in NETS:
-            per_seed = []
-            for seed in seeds:
-                path = out / "eval" / model_name(net, n, seed) / "summary.json"
-                if path.is_file():
-                    per_seed.append(read_json(path))
-            results[f"{net}_{n}"] = per_seed
+def collect_results(out: Path, sweep: Sweep) -> dict[Model, dict[str, Any]]:
+    """The evaluation summaries of the sweep's models that exist."""
+    results = {}
+    for model in sweep.models():
+        path = out / "eval" / model.name / "summary.json"
+        if path.is_file():
+            results[model] = read_json(path)
     return results
+
+
+def per_seed(
+    results: dict[Model, dict[str, Any]], net: str, n: int, variant: Variant
+) -> list[dict[str, Any]]:
+    """The summaries of one (network, size, variant), in seed order."""
+    return [
+        r for m, r in sorted(results.items(), key=lambda item: item[0].seed)
+        if (m.net, m.runs, m.variant) == (net, n, variant)
+    ]
 
 
 def _circling(runs: list[dict[str, Any]]) -> float:
@@ -49,37 +70,45 @@ def _circling(runs: list[dict[str, Any]]) -> float:
     return float(np.mean([r["end_reason"] == "time_limit" and r["distance"] < 2.0 for r in runs]))
 
 
-def table1_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> list[dict[str, str]]:
-    """The paper's Table I columns, mean (std) over seeds, one row per training-set size."""
-    results = collect_results(out, subsets, seeds)
+def _groups(sweep: Sweep) -> list[tuple[Variant, int, dict[str, str]]]:
+    """(variant, size, the row's first cells): one table row each."""
+    many = len(sweep.variants()) > 1
+    return [
+        (variant, n, ({"variant": variant_label(variant)} if many else {}) | {"runs": str(n)})
+        for variant in sweep.variants()
+        for n in sweep.subsets
+    ]
+
+
+def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
+    """The paper's Table I columns, mean (std) over seeds and the 95 % interval of the mean for
+    distance and success; one row per (variant, training-set size)."""
+    results = collect_results(out, sweep)
     rows = []
-    for n in subsets:
-        row = {"runs": str(n)}
-        for net in ("coll", "depth"):
-            runs = results[f"{net}_{n}"]
+    for variant, n, row in _groups(sweep):
+        for net in sorted(sweep.nets):
+            runs = per_seed(results, net, n, variant)
             label = NET_LABELS[net]
-            row[f"distance {label}"] = _mean_std([r["summary"]["distance_mean"] for r in runs], ".2f")
-            row[f"success {label}"] = _mean_std([r["summary"]["successes"] for r in runs], ".1f")
-            row[f"imitation {label}"] = _mean_std([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
-            row[f"circling {label}"] = _mean_std([_circling(r["runs"]) for r in runs], ".0%")
+            row[f"distance {label}"] = _cell([r["summary"]["distance_mean"] for r in runs], ".2f", True)
+            row[f"success {label}"] = _cell([r["summary"]["successes"] for r in runs], ".1f", True)
+            row[f"imitation {label}"] = _cell([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
+            row[f"circling {label}"] = _cell([_circling(r["runs"]) for r in runs], ".0%")
             row[f"seeds {label}"] = str(len(runs))
-        coll, depth = results[f"coll_{n}"], results[f"depth_{n}"]
-        row["cross-entropy CQN"] = _mean_std([r["offline"]["value"] for r in coll if "offline" in r], ".3f")
-        row["abs diff DQN"] = _mean_std([r["offline"]["value"] for r in depth if "offline" in r], ".3f")
+            offline = "cross-entropy CQN" if net == "coll" else "abs diff DQN"
+            row[offline] = _cell([r["offline"]["value"] for r in runs if "offline" in r], ".3f")
         paper = PAPER_TABLE1.get(n)
         row["paper: success CQN / DQN"] = f"{paper['coll'][1]} / {paper['depth'][1]}" if paper else "–"
         rows.append(row)
     return rows
 
 
-def per_seed_rows(out: Path, subsets: tuple[int, ...], seeds: tuple[int, ...]) -> list[dict[str, str]]:
+def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
     """Successes / mean distance of every seed: the spread that a mean (std) over 3 seeds hides."""
-    results = collect_results(out, subsets, seeds)
+    results = collect_results(out, sweep)
     rows = []
-    for n in subsets:
-        row = {"runs": str(n)}
-        for net in ("depth", "coll"):
-            summaries = [r["summary"] for r in results[f"{net}_{n}"]]
+    for variant, n, row in _groups(sweep):
+        for net in sweep.nets:
+            summaries = [r["summary"] for r in per_seed(results, net, n, variant)]
             cells = [f"{s['successes']}/{s['distance_mean']:.1f}" for s in summaries]
             row[f"{NET_LABELS[net]}: successes/m per seed"] = ", ".join(cells) or "–"
         paper = PAPER_TABLE1.get(n)

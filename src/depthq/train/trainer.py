@@ -37,12 +37,15 @@ class DivergedError(ConfigError):
     """The loss became NaN or infinite; the usual cause is a learning rate too large (CLI exit 2)."""
 
 
-def train(config: TrainConfig, out: Path, progress: bool = True, device: str = "auto") -> Path:
+def train(
+    config: TrainConfig, out: Path, progress: bool = True, device: str = "auto", threads: int | None = None
+) -> Path:
     """Train `config` into the folder `out` (layout: `depthq.train.checkpoint`) and return it.
 
     A folder holding this training resumes from its last epoch, bit for bit as if never stopped (on
-    the CPU; a GPU's kernels need not be deterministic); a finished one is returned as is; one
-    holding another training is a ConfigError. `device`: see `depthq.nets.device`.
+    the CPU, with the same `threads`: torch sums floats in an order that depends on their number;
+    None: this process's cores; a GPU's kernels need not be deterministic); a finished one is
+    returned as is; one holding another training is a ConfigError. `device`: see `depthq.nets.device`.
     """
     out = Path(out)
     where = resolve_device(device)
@@ -55,7 +58,7 @@ def train(config: TrainConfig, out: Path, progress: bool = True, device: str = "
     out.mkdir(parents=True, exist_ok=True)
     checkpoint.write_config(out, config, fingerprint)
 
-    torch.set_num_threads(cores())
+    torch.set_num_threads(threads or cores())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)

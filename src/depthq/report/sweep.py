@@ -1,0 +1,160 @@
+"""A sweep: one dataset, then every (network, training runs, seed, variant) model trained and evaluated.
+
+The presets (`depthq.report.presets`) are sweeps; `depthq sweep` widens one: more seeds (`--seeds
+0-9`), other sizes, one network, or a grid of training settings (`--set dropout=0,0.5`), each value
+a *variant* whose models are named after it (`depth_n200_s0_dropout0.5`). A sweep's *setup* (the
+dataset, the evaluation canyons, the training budget) is what its folder's results depend on; the
+grid may change between runs of the same folder, so 10 seeds reuse the 3 a preset trained.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any
+
+from depthq.errors import ConfigError
+from depthq.report.layout import NETS, model_name
+from depthq.sim.world import DEFAULT_DECISION_HZ
+
+if TYPE_CHECKING:
+    from depthq.train.config import TrainConfig
+
+Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field, value) pairs; () is the preset's own setting
+# The grid's own axes, or fixed by the sweep's setup: not for --set.
+NOT_IN_GRID = ("model", "data", "runs", "seed")
+_SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
+
+
+@dataclass(frozen=True)
+class Model:
+    """One cell of the grid: a network trained on the first `runs` runs with `seed`, in `variant`."""
+
+    net: str
+    runs: int
+    seed: int
+    variant: Variant = ()
+    # The settings of `variant` that differ from the sweep's own: they name the model's folders, so a
+    # variant equal to the preset (e.g. dropout=0.0) reuses the preset's models.
+    differs: Variant = ()
+
+    @property
+    def name(self) -> str:
+        return model_name(self.net, self.runs, self.seed, self.differs)
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """What `depthq sweep` (and `depthq reproduce`, for a preset) collects, trains and evaluates."""
+
+    name: str
+    runs: int  # usable training runs collected (the largest subset)
+    val_runs: int
+    max_steps: int  # collection step limit per run
+    subsets: tuple[int, ...]  # nested training-set sizes (first n runs)
+    seeds: tuple[int, ...]  # training seeds per (network, size, variant)
+    epochs: int | None  # None: the trainer's default budget
+    train_batches: int
+    val_batches: int
+    canyons: str  # evaluation canyon set
+    time_limit_s: float
+    workers: int = 2
+    decision_hz: float = DEFAULT_DECISION_HZ  # collection and evaluation: one decision per camera frame
+    nets: tuple[str, ...] = NETS
+    grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
+
+    def __post_init__(self) -> None:
+        if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > self.runs:
+            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} (its runs)")
+        if not self.seeds or min(self.seeds) < 0:
+            raise ConfigError(f"sweep {self.name}: needs seeds >= 0, got {self.seeds}")
+        if not self.nets or set(self.nets) - set(NETS):
+            raise ConfigError(f"sweep {self.name}: networks must be some of {NETS}, got {self.nets}")
+        for values in (self.subsets, self.seeds, self.nets):
+            if len(set(values)) != len(values):
+                raise ConfigError(f"sweep {self.name}: {values} repeats a value")
+        for model in self.models():  # every variant must be a valid training, before any work
+            self.train_config(model, "data")
+
+    def variants(self) -> list[Variant]:
+        keys = [k for k, _ in self.grid]
+        grid = itertools.product(*(values for _, values in self.grid))
+        return [tuple(zip(keys, values, strict=True)) for values in grid]
+
+    def models(self) -> list[Model]:
+        """Seed-major: an interrupted sweep already holds a whole table for its first seed."""
+        own = self.train_config(Model(self.nets[0], self.subsets[0], self.seeds[0]), "data")
+        return [
+            Model(net, n, seed, variant, tuple((k, v) for k, v in variant if getattr(own, k) != v))
+            for seed in self.seeds
+            for variant in self.variants()
+            for n in self.subsets
+            for net in self.nets
+        ]
+
+    def train_config(self, model: Model, data: str) -> TrainConfig:
+        from depthq.train.config import TrainConfig
+
+        budget = {} if self.epochs is None else {"epochs": self.epochs}
+        return TrainConfig(
+            model=model.net,
+            data=data,
+            runs=model.runs,
+            seed=model.seed,
+            train_batches=self.train_batches,
+            val_batches=self.val_batches,
+            **(budget | dict(model.variant)),
+        )
+
+    def setup(self) -> dict[str, Any]:
+        """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent)."""
+        keep = ("runs", "val_runs", "max_steps", "epochs", "train_batches", "val_batches", "canyons",
+                "time_limit_s", "decision_hz")
+        return json.loads(json.dumps({k: getattr(self, k) for k in keep}))
+
+
+def variant_label(variant: Variant) -> str:
+    return ", ".join(f"{k}={v}" for k, v in variant) or "preset"
+
+
+def parse_ints(text: str, what: str) -> tuple[int, ...]:
+    """'0-9', '0,2,5' or '0-2,7' → the integers, in order."""
+    values: list[int] = []
+    try:
+        for part in text.split(","):
+            low, _, high = part.partition("-")
+            values += range(int(low), int(high or low) + 1)
+    except ValueError:
+        raise ConfigError(f"{what} must be integers or ranges such as 0-9 or 50,200; got {text!r}") from None
+    if not values:
+        raise ConfigError(f"{what} names no value: {text!r}")
+    return tuple(values)
+
+
+def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
+    """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field and the values to try."""
+    from depthq.train.config import TrainConfig
+
+    key, sep, raw = text.partition("=")
+    defaults = {f.name: f.default for f in fields(TrainConfig)}
+    if not sep or not raw:
+        raise ConfigError(f"--set takes FIELD=VALUE[,VALUE…], got {text!r}")
+    if key not in defaults or key in NOT_IN_GRID:
+        allowed = sorted(set(defaults) - set(NOT_IN_GRID))
+        raise ConfigError(f"--set {key!r} is not a training setting one can sweep; one of {allowed}")
+    values = []
+    for item in raw.split(","):
+        try:
+            value = json.loads(item)
+        except json.JSONDecodeError:
+            value = item  # a word, e.g. a trunk's name
+        if isinstance(defaults[key], float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if not _SAFE.match(str(value)):
+            raise ConfigError(f"--set {key}: value {item!r} cannot name a model folder")
+        values.append(value)
+    if len(set(map(str, values))) != len(values):
+        raise ConfigError(f"--set {key}: {raw!r} repeats a value")
+    return key, tuple(values)
