@@ -66,33 +66,36 @@ def plot_success_vs_runs(out: Path, sweep: Sweep, path: Path) -> None:
     mean over seeds with its 95 % interval, one line per network and variant."""
     results = collect_results(out, sweep)
     variants = sweep.variants()
+    colours = {"depth": "tab:blue", "coll": "tab:orange"}
+    nets = [net for net in ("depth", "coll") if net in sweep.nets]
+    lines = [(net, k, variant) for net in nets for k, variant in enumerate(variants)]
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    styles = ("o-", "s-", "^-", "v-", "D-", "P-")
-    for net, colour in (("depth", "tab:blue"), ("coll", "tab:orange")):
-        if net not in sweep.nets:
-            continue
-        for k, variant in enumerate(variants):
-            xs, mean, low, high = [], [], [], []
-            for n in sweep.subsets:
-                succ = [r["summary"]["successes"] for r in per_seed(results, net, n, variant)]
-                if succ:
-                    ci = interval(succ) or (np.mean(succ), np.mean(succ))
-                    xs.append(n)
-                    mean.append(np.mean(succ))
-                    low.append(np.mean(succ) - ci[0])
-                    high.append(ci[1] - np.mean(succ))
-            if xs:
-                label = NET_LABELS[net] + (f", {variant_label(variant)}" if len(variants) > 1 else "")
-                ax.errorbar(xs, mean, yerr=[low, high], fmt=styles[k % len(styles)], capsize=3, color=colour,
-                            alpha=1.0 - 0.5 * k / len(variants), label=label)
+    for line, (net, k, variant) in enumerate(lines):
+        shift = 1 + 0.025 * (line - (len(lines) - 1) / 2)  # side by side: the bars do not hide each other
+        xs, mean, low, high = [], [], [], []
+        for n in sweep.subsets:
+            succ = [r["summary"]["successes"] for r in per_seed(results, net, n, variant)]
+            if succ:
+                ci = interval(succ) or (np.mean(succ), np.mean(succ))
+                xs.append(n * shift)
+                mean.append(np.mean(succ))
+                low.append(np.mean(succ) - ci[0])
+                high.append(ci[1] - np.mean(succ))
+        if xs:
+            label = NET_LABELS[net] + (f", {variant_label(variant)}" if len(variants) > 1 else "")
+            ax.errorbar(xs, mean, yerr=[low, high], fmt="osv^DP"[k % 6] + "-", capsize=3, color=colours[net],
+                        alpha=1.0 - 0.5 * k / len(variants), label=label)
+    for net in sweep.nets:
         paper = [(n, PAPER_TABLE1[n][net][1]) for n in sweep.subsets if n in PAPER_TABLE1]
         if paper:
             label = f"{NET_LABELS[net]}, paper"
-            ax.plot(*zip(*paper, strict=True), "--", color=colour, alpha=0.6, label=label)
+            ax.plot(*zip(*paper, strict=True), "--", color=colours[net], alpha=0.6, label=label)
     seeds = len(sweep.seeds)
     ax.set_title(f"mean over {seeds} seeds, bars: 95 % interval" if seeds > 1 else "one seed")
+    canyons = max((r["summary"]["runs"] for r in results.values()), default=20)
+    ax.set_ylim(-0.5, canyons + 0.5)
     ax.set_xlabel("training runs")
-    ax.set_ylabel("successes (distance > 15 m)")
+    ax.set_ylabel(f"successes out of {canyons} (distance > 15 m)")
     ax.set_xscale("log")
     ax.set_xticks(list(sweep.subsets), [str(n) for n in sweep.subsets])
     ax.minorticks_off()  # the sizes themselves, not 4×10¹ …

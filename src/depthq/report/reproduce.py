@@ -145,14 +145,21 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
                 Job(f"evaluate {model.name}", drive, (f"train {model.name}",), remote, sweep.workers, gpus),
             ),
         ]
-    # One video, of the model the report shows: its first canyon driven again (the same run).
+    # One video, of the model the report shows: its first canyon driven again (the same run). Which
+    # model that is, is known once every evaluation is done.
+    evaluations = [stage.done for stage in stages if stage.name.startswith("evaluate ")]
     stages.append(
         Stage(
-            lambda: (best := best_depth_eval(out, sweep)) is not None and (best / "video.mp4").is_file(),
-            Job("video of the best Depth-Q-Net", lambda: _video_of_best(out, sweep, eval_config, device)),
+            partial(_video_done, out, sweep, evaluations),
+            Job("video of the best Depth-Q-Net", partial(_video_of_best, out, sweep, eval_config, device)),
         )
     )
     return stages
+
+
+def _video_done(out: Path, sweep: Sweep, evaluations: list[Callable[[], bool]]) -> bool:
+    best = best_depth_eval(out, sweep)
+    return all(done() for done in evaluations) and (best is None or (best / "video.mp4").is_file())
 
 
 def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str) -> None:
