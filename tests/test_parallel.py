@@ -11,7 +11,7 @@ from depthq.cli import main
 from depthq.data.collect import CollectConfig, collect
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate
-from depthq.parallel import Executor
+from depthq.parallel import Executor, _probe_shared
 
 ray = pytest.importorskip("ray")
 
@@ -65,3 +65,18 @@ def test_bad_executor_settings_are_named(tmp_path: Path, capsys: pytest.CaptureF
         Executor("local", "auto")
     assert main(["evaluate", "heuristic", "--out", str(tmp_path / "o"), "--executor", "dask"]) == 2
     assert "dask" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_the_output_folder_is_checked_from_every_node(tmp_path: Path, on_ray: Executor) -> None:
+    """On a Ray started here the folder passes (created, and no probe file left behind); a node that
+    does not see the driver's token, or cannot write next to it, says so."""
+    folder = tmp_path / "shared" / "out"
+    on_ray.check_shared(folder)
+    assert folder.is_dir() and not list(folder.iterdir())
+    elsewhere = tmp_path / "elsewhere"
+    assert _probe_shared(str(elsewhere / ".token"), "n1") == f"does not see {elsewhere}"
+    token = folder / ".token"
+    token.write_text("driver")
+    (folder / ".token-n2").mkdir()  # a file the node cannot create
+    assert _probe_shared(str(token), "n2").startswith(f"cannot write to {folder}")
+    assert _probe_shared(str(token), "n3") == "" and (folder / ".token-n3").read_text() == "n3"

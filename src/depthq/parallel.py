@@ -24,6 +24,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import queue
+import shutil
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -83,9 +84,19 @@ class Executor:
         return ((job.name, _timed(job.run)) for job in jobs)
 
     def check_shared(self, folder: Path) -> None:
-        """Fail with a clear message unless every node of the cluster sees and can write `folder`."""
-        if self.kind == "ray":
-            _check_shared_ray(Path(folder).resolve(), self.address)
+        """Fail with a clear message unless every node of the cluster sees and can write `folder`
+        (created if missing, and removed again if the check fails)."""
+        if self.kind != "ray":
+            return
+        folder = Path(folder).resolve()
+        created = not folder.exists()
+        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            _check_shared_ray(folder, self.address)
+        except ConfigError:
+            if created:
+                shutil.rmtree(folder, ignore_errors=True)
+            raise
 
 
 @dataclass(frozen=True)
@@ -247,7 +258,6 @@ def _check_shared_ray(folder: Path, address: str | None) -> None:
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
     ray = _ray(address)
-    folder.mkdir(parents=True, exist_ok=True)
     token = folder / f".shared-check-{secrets.token_hex(4)}"
     token.write_text("driver")
     nodes = [n for n in ray.nodes() if n["Alive"] and n["Resources"].get("CPU", 0) > 0]

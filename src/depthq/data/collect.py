@@ -168,7 +168,8 @@ def collect(
     """
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
-    dataset = Dataset.create(Path(out), to_dict(config), seed, overwrite=overwrite)
+    executor.check_shared(out)  # workers write the run files themselves
+    dataset = Dataset.create(Path(out).resolve(), to_dict(config), seed, overwrite=overwrite)
     wanted = {"train": config.runs, "val": config.val_runs}
     bar = tqdm(
         total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True

@@ -201,6 +201,9 @@ def evaluate(
     where = str(resolve_device(device))
     # a bad spec fails here, before any worker starts
     description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
+    if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
+        policy_spec = str(Path(policy_spec).resolve())
+        executor.check_shared(Path(policy_spec))
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
     runs: dict[int, dict[str, Any]] = {}

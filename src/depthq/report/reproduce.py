@@ -202,8 +202,8 @@ def run_sweep(
 
     where = str(resolve_device(device))  # a device torch cannot use fails here, before any work
     out = Path(out).resolve()  # the same path on every node of a cluster
-    _claim(out, sweep)
     executor.check_shared(out)
+    _claim(out, sweep)
     times_path = out / "stages.json"
     times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
     stages = build_stages(sweep, out, where, executor)
