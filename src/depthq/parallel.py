@@ -64,16 +64,22 @@ class Executor:
             raise ConfigError('--executor ray needs Ray: pip install "depthq[ray]"')
 
     def run(
-        self, make_worker: Callable[[], Worker], tasks: Sequence[Any], workers: int, what: str
+        self,
+        make_worker: Callable[[], Worker],
+        tasks: Sequence[Any],
+        workers: int,
+        what: str,
+        gpu: bool = False,
     ) -> Iterator[tuple[int, Any]]:
-        """(position in `tasks`, result) for every task, in the order they finish."""
+        """(position in `tasks`, result) for every task, in the order they finish. `gpu`: the workers
+        share one GPU (on Ray, each actor reserves 1/`workers` of one)."""
         if workers < 1:
             raise ConfigError(f"--workers must be >= 1, got {workers}")
         if not tasks:
             return iter(())
         workers = min(workers, len(tasks))
         if self.kind == "ray":
-            return _run_ray(make_worker, tasks, workers, what, self.address)
+            return _run_ray(make_worker, tasks, workers, what, self.address, gpu / workers)
         return _run_local(make_worker, tasks, workers, what)
 
     def run_jobs(self, jobs: Sequence[Job]) -> Iterator[tuple[str, float]]:
@@ -194,11 +200,13 @@ def _ray(address: str | None):
     return ray
 
 
-def _run_ray(make_worker, tasks, workers: int, what: str, address: str | None) -> Iterator[tuple[int, Any]]:
+def _run_ray(
+    make_worker, tasks, workers: int, what: str, address: str | None, gpus: float
+) -> Iterator[tuple[int, Any]]:
     from ray.util import ActorPool
 
     ray = _ray(address)
-    actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(_RayWorker)
+    actor = ray.remote(num_cpus=1, num_gpus=gpus, max_restarts=-1, max_task_retries=-1)(_RayWorker)
     actors = [actor.remote(make_worker) for _ in range(workers)]
     try:
         yield from ActorPool(actors).map_unordered(lambda a, item: a.run.remote(item), list(enumerate(tasks)))

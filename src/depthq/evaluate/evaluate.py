@@ -216,7 +216,8 @@ def evaluate(
         disable=not progress,
         dynamic_ncols=True,
     ) as bar:
-        for k, run in executor.run(make_worker, list(enumerate(config.canyons)), workers, "evaluation"):
+        tasks, gpu = list(enumerate(config.canyons)), where.startswith("cuda")
+        for k, run in executor.run(make_worker, tasks, workers, "evaluation", gpu):
             runs[k] = run
             bar.update(1)
             bar.set_postfix(success=sum(r["success"] for r in runs.values()))
