@@ -5,6 +5,9 @@ import os
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Ray's token authentication, as Ray itself turns on for a cluster started here, set before Ray is
+# imported (it reads the mode once per process): the two-node test's driver must join with it.
+os.environ.setdefault("RAY_AUTH_MODE", "token")
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,8 @@
 """A two-node Ray cluster on this machine (`ray start --head` plus a second `ray start --address`,
-each with its own temp folder): the smoke preset's trainings and evaluations run on both nodes, as
-Ray's task records show, and killing the second node mid-run still gives the local tables."""
+each with its own temp folder and 2 CPUs): the smoke preset's trainings and evaluations, each a Ray
+task, run on both nodes, as Ray's task records show, and killing the second node mid-run still gives
+the tables of the local executor, to the byte (this is also the suite's test that Ray and local
+processes give the same tables: a second, one-node run would cost 80 s of the 10-minute budget)."""
 
 from __future__ import annotations
 
@@ -42,11 +44,12 @@ def _raylets(port: int) -> list[int]:
 
 
 @pytest.fixture
-def cluster(monkeypatch):
+def cluster():
     """Head and worker node, 2 CPUs each; yields (address, dashboard address, worker's node-manager
     port). Short temp folders: Ray's socket paths must fit in 107 bytes."""
-    env = os.environ | {"RAY_AUTH_MODE": "disabled", "RAY_USAGE_STATS_ENABLED": "0"}
-    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")  # this process joins as the driver
+    # Token authentication (conftest.py sets it for this process, the driver): the nodes and the
+    # driver share one token through ~/.ray/auth_token.
+    env = os.environ | {"RAY_AUTH_MODE": "token", "RAY_USAGE_STATS_ENABLED": "0"}
     port, dashboard, worker_port = _free_port(), _free_port(), _free_port()
     temp = Path(tempfile.mkdtemp(prefix="ray", dir="/tmp"))
     ray_bin = shutil.which("ray")
@@ -57,6 +60,8 @@ def cluster(monkeypatch):
     worker = [ray_bin, "start", "--address", f"127.0.0.1:{port}", "--temp-dir", str(temp / "worker"),
               "--node-manager-port", str(worker_port), *common]
     try:
+        # the token every node and the driver read (kept if there is one: Ray made it on an earlier start)
+        subprocess.run([ray_bin, "get-auth-token", "--generate"], env=env, check=True, capture_output=True)
         for cmd in (head, worker):
             subprocess.run(cmd, env=env, check=True, capture_output=True, timeout=120)
         yield f"127.0.0.1:{port}", f"http://127.0.0.1:{dashboard}", worker_port

@@ -8,7 +8,6 @@ import pytest
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.parallel import Executor
 from depthq.report.presets import get_preset
 from depthq.report.reproduce import build_stages, reproduce
 from depthq.report.tables import interval
@@ -61,24 +60,6 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
         if path != redone:
             assert path.stat().st_mtime_ns == stamp, f"{path} was redone"
     assert set(read_json(smoke / "stages.json")) == set(times)
-
-
-def test_the_sweep_on_ray_gives_the_same_tables(smoke, tmp_path):
-    """The smoke preset from its dataset on, on a Ray started here: every training and every
-    evaluation a Ray task (trainings with this machine's thread count): the same tables to the byte."""
-    ray = pytest.importorskip("ray")
-    copy = tmp_path / "out"
-    copy.mkdir()
-    shutil.copytree(smoke / "data", copy / "data")
-    shutil.copyfile(smoke / "reproduce.json", copy / "reproduce.json")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        times = reproduce("smoke", copy, progress=False, executor=Executor("ray"))
-    finally:
-        ray.shutdown()
-    assert "collect" not in times and {"train coll_n3_s0", "evaluate depth_n6_s0"} <= set(times)
-    for name in ("table1.csv", "table1.md", "table2.md"):
-        assert (copy / name).read_bytes() == (smoke / name).read_bytes(), name
 
 
 def test_a_sweep_widens_a_folder_and_reuses_its_models(smoke, tmp_path, capsys):
