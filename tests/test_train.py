@@ -15,13 +15,15 @@ from depthq.configio import read_json
 from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
+from depthq.data.views import DepthView
 from depthq.errors import ConfigError, DataError
 from depthq.nets.checkpoint import load_qnet
 from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import DEFAULT_TRUNK, preprocess
+from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.train.checkpoint import build_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import cache_dir, load_features
+from depthq.train.samples import ImageSamples
 from depthq.train.trainer import DivergedError, train
 
 FAST = {"train_batches": 8, "val_batches": 2, "batch_size": 32}
@@ -153,11 +155,28 @@ def test_blocked_adadelta_equals_torch_adadelta() -> None:
     assert all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
 
 
-def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path) -> None:
-    config = _config(data, trunk="mobilenet_v1_025", epochs=1, train_batches=2, batch_size=8, input_size=64)
-    out = train(config, tmp_path / "mobilenet", progress=False)
+@pytest.mark.parametrize("trunk", ["mobilenet_v1_025", "efficientnet_lite0_columns_tuned"])
+def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path, trunk: str) -> None:
+    config = _config(data, trunk=trunk, epochs=1, train_batches=2, batch_size=8, input_size=64)
+    out = train(config, tmp_path / trunk, progress=False)
     net, _ = load_qnet(out, "best")
-    assert not net.trunk.frozen and any(k.startswith("trunk.") for k in load_file(out / "best.safetensors"))
+    saved = load_file(out / "best.safetensors")
+    assert not net.trunk.frozen and any(k.startswith("trunk.") for k in saved)
+    torch.manual_seed(config.seed)  # as `train` does before building the network, trunk first
+    start = build_trunk(trunk).state_dict()  # the training's start: ImageNet or the seed's random weights
+    moved = [k for k, v in start.items() if v.is_floating_point() and not torch.equal(saved[f"trunk.{k}"], v)]
+    assert moved, "the trunk's weights did not change in training"
+
+
+def test_image_samples_are_the_preprocessed_frames(data: Path) -> None:
+    """Frames are decoded once and held as uint8; a batch must equal preprocessing its frames."""
+    view = DepthView(Dataset.open(data), "train")
+    samples = ImageSamples(view, 64)
+    idx = torch.tensor([0, len(view) - 1, 7, 7])
+    batch = samples.batch(idx)
+    expected = preprocess(np.stack([view[i][0] for i in idx.tolist()]), 64)
+    assert torch.equal(batch.inputs, expected)
+    assert torch.equal(batch.targets, torch.from_numpy(view.arrays["target"][idx.numpy()]).float())
 
 
 def test_default_learning_rates() -> None:

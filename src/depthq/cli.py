@@ -40,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
             if err.name == f"depthq.scripts.{module_name}":
                 continue  # verb not built yet
             raise
-        p = sub.add_parser(verb, help=(module.__doc__ or "").strip().splitlines()[0])
+        summary = (module.__doc__ or "").strip().splitlines()[0]
+        p = sub.add_parser(verb, help=summary.replace("%", "%%"))  # argparse %-formats help texts
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser

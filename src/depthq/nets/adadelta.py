@@ -20,6 +20,11 @@ class BlockedAdadelta(torch.optim.Adadelta):
 
     @torch.no_grad()
     def step(self, closure: None = None) -> None:  # type: ignore[override]
+        if self.param_groups[0]["params"][0].device.type != "cpu":
+            # Blocks are for a CPU's cache; on a GPU their kernel launches would dominate a small
+            # network's step, and torch's multi-tensor step does the same arithmetic in a few launches.
+            super().step()
+            return
         for group in self.param_groups:
             if group["maximize"] or group["differentiable"] or group["capturable"]:
                 raise ValueError("BlockedAdadelta supports plain minimisation only")

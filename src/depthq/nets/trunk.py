@@ -2,7 +2,8 @@
 
 A trunk maps float images in [0, 1], (B, 3, H, W), to a (B, feature_dim) feature. A frozen trunk
 (EfficientNet-Lite0 with ImageNet weights) is a fixed function, so its features can be cached once
-per dataset; a trainable one (MobileNet-v1-0.25 from scratch) is trained with the head.
+per dataset; a trainable one (MobileNet-v1-0.25 from scratch, or EfficientNet-Lite0 fine-tuned) is
+trained with the head.
 """
 
 from __future__ import annotations
@@ -109,6 +110,12 @@ TRUNKS: dict[str, TrunkSpec] = {
     "efficientnet_lite0_columns": TrunkSpec(  # the default
         _efficientnet_columns, LITE0_STAGES[-1].out_ch * COLUMNS, frozen=True
     ),
+    # The columns' network fine-tuned with the head from its ImageNet weights (the paper's freeze most
+    # likely did not take effect, so its trunk was tuned); BatchNorm stays folded, so small batches
+    # cannot disturb its statistics. Images every step: a GPU job.
+    "efficientnet_lite0_columns_tuned": TrunkSpec(
+        _efficientnet_columns, LITE0_STAGES[-1].out_ch * COLUMNS, frozen=False
+    ),
     "mobilenet_v1_025": TrunkSpec(_mobilenet, MOBILENET_DIM, frozen=False),  # the paper's, from scratch
 }
 
@@ -133,7 +140,12 @@ def build_trunk(name: str, pretrained: bool = True) -> Trunk:
 
 
 def preprocess(images: np.ndarray | torch.Tensor, size: int = INPUT_SIZE) -> torch.Tensor:
-    """uint8 frames (B, H, W, 3) or one (H, W, 3) → float (B, 3, size, size) in [0, 1].
+    """uint8 frames (B, H, W, 3) or one (H, W, 3) → float (B, 3, size, size) in [0, 1]."""
+    return resize_frames(images, size).float().div_(255.0)
+
+
+def resize_frames(images: np.ndarray | torch.Tensor, size: int = INPUT_SIZE) -> torch.Tensor:
+    """uint8 frames (B, H, W, 3) or one (H, W, 3) → uint8 (B, 3, size, size), as `preprocess` sees them.
 
     Bilinear with antialiasing, aspect ratio not kept (as in the paper: 410 × 308 → 128 × 128).
     Resizing runs on uint8 (PyTorch's fast path, ~7× faster than on floats; differs by ≤ 1/255).
@@ -147,7 +159,6 @@ def preprocess(images: np.ndarray | torch.Tensor, size: int = INPUT_SIZE) -> tor
         )
     if size < 1:
         raise ConfigError(f"preprocess: size must be ≥ 1, got {size}")
-    resized = F.interpolate(
+    return F.interpolate(
         frames.permute(0, 3, 1, 2), size=(size, size), mode="bilinear", antialias=True, align_corners=False
     )
-    return resized.float().div_(255.0)

@@ -21,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"epochs of 100 training + 10 validation batches (default {DEFAULT_EPOCHS})")
     p.add_argument("--trunk", default=DEFAULT_TRUNK,
                    help=f"{DEFAULT_TRUNK} (frozen, default), efficientnet_lite0 (frozen, globally pooled) "
-                   "or mobilenet_v1_025 (from scratch)")
+                   "efficientnet_lite0_columns_tuned (fine-tuned with the head) or mobilenet_v1_025 "
+                   "(from scratch)")
     p.add_argument("--lr", type=float, default=None,
                    help="learning rate (default 0.1; the paper: 0.1 depth, 0.01 coll)")
     p.add_argument("--dropout", type=float, default=0.0,

@@ -146,10 +146,10 @@ def _samples(
     train_view = view(dataset, "train", config.runs, data)
     _check_labels(config, train_view.arrays["target"])
     if progress:
-        tqdm.write(f"trunk {config.trunk!r} has no pretrained weights: trained from scratch with the head, "
-                   "on images decoded every batch (slow)")
-    return ImageSamples(train_view, config.input_size), ImageSamples(view(dataset, "val", None, data),
-                                                                     config.input_size)
+        tqdm.write(f"trunk {config.trunk!r} is trained with the head, on images")
+    val_view = view(dataset, "val", None, data)
+    return (ImageSamples(train_view, config.input_size, progress),
+            ImageSamples(val_view, config.input_size, progress))
 
 
 def _check_labels(config: TrainConfig, targets: np.ndarray) -> None:
