@@ -5,7 +5,7 @@ Two sources with one interface, so the training loop does not care which trunk i
 - `FeatureSamples`: a frozen trunk's cached features, held in memory (float16), batches in
   microseconds; the model runs its head only.
 - `ImageSamples`: frames decoded from the run files and resized once, held as uint8, for a trunk
-  trained with the head (MobileNet-v1-0.25 from scratch).
+  trained with the head (MobileNet-v1-0.25 from scratch, EfficientNet-Lite0 fine-tuned).
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ class ImageSamples(Samples):
     """Samples as frames, decoded and resized once and held as uint8: the trunk runs (and learns) too.
 
     Decoding a JPEG costs more than a small trunk's training step on a GPU, and every frame is drawn
-    many times, so the frames are decoded once (S × 3 × size² bytes: 1.5 GB for 500 runs at 128 px).
+    many times, so the frames are decoded once (S × 3 × size² bytes: ≈ 1.3 GB for 500 runs at 128 px).
     Resizing stays on uint8 as in `preprocess`, so a batch is bit-equal to preprocessing its frames.
     """
 
