@@ -141,7 +141,12 @@ def build_trunk(name: str, pretrained: bool = True) -> Trunk:
 
 def preprocess(images: np.ndarray | torch.Tensor, size: int = INPUT_SIZE) -> torch.Tensor:
     """uint8 frames (B, H, W, 3) or one (H, W, 3) → float (B, 3, size, size) in [0, 1]."""
-    return resize_frames(images, size).float().div_(255.0)
+    return scale_frames(resize_frames(images, size))
+
+
+def scale_frames(frames: torch.Tensor) -> torch.Tensor:
+    """Resized uint8 frames (B, 3, S, S) → float in [0, 1], the trunks' input."""
+    return frames.float().div_(255.0)
 
 
 def resize_frames(images: np.ndarray | torch.Tensor, size: int = INPUT_SIZE) -> torch.Tensor:

@@ -19,7 +19,7 @@ from tqdm import tqdm
 
 from depthq.data.views import FrameView, run_then_frame
 from depthq.nets.heads import QNet
-from depthq.nets.trunk import resize_frames
+from depthq.nets.trunk import resize_frames, scale_frames
 from depthq.train.features import FeatureTable
 
 
@@ -73,7 +73,7 @@ class ImageSamples(Samples):
 
     Decoding a JPEG costs more than a small trunk's training step on a GPU, and every frame is drawn
     many times, so the frames are decoded once (S × 3 × size² bytes: ≈ 1.3 GB for 500 runs at 128 px).
-    Resizing stays on uint8 as in `preprocess`, so a batch is bit-equal to preprocessing its frames.
+    Resized and scaled by `preprocess`'s own two steps, so a batch is bit-equal to preprocessing its frames.
     """
 
     def __init__(self, view: FrameView, size: int, progress: bool = False) -> None:
@@ -86,7 +86,7 @@ class ImageSamples(Samples):
             self.frames[start:stop] = resize_frames(np.stack([view[i][0] for i in range(start, stop)]), size)
 
     def batch(self, idx: torch.Tensor) -> Batch:
-        return Batch(self.frames[idx].float().div_(255.0), self.actions[idx], self.targets[idx])
+        return Batch(scale_frames(self.frames[idx]), self.actions[idx], self.targets[idx])
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model(batch.inputs, batch.actions)
