@@ -1,4 +1,4 @@
-"""The checks behind README "What this shows": why Depth-Q-Net steers towards walls on our data.
+"""The checks behind docs/results.md#before-10 ("What this shows"): why Depth-Q-Net steers towards walls on our data.
 
     python docs/investigation.py runs/quick/data
 

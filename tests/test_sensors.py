@@ -1,4 +1,4 @@
-"""Depth bins and the bump rule on hand-made scans (pure functions, SPEC §1.2)."""
+"""Depth bins and the bump rule on hand-made scans (pure functions, docs/design.md#bins)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,5 @@
-"""The depth heuristic expert (SPEC §1.8): steer towards the sector whose closest obstacle is farthest.
+"""The depth heuristic expert: steer towards the sector whose closest obstacle is farthest
+(docs/design.md#expert).
 
 Table I's imitation loss compares every policy's actions with this expert's on the same observations.
 """

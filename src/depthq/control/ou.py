@@ -1,4 +1,5 @@
-"""Ornstein–Uhlenbeck exploration (SPEC §1.3): temporally correlated random yaw rates for data collection."""
+"""Ornstein–Uhlenbeck exploration: temporally correlated random yaw rates for data collection
+(docs/design.md#exploration)."""
 
 from __future__ import annotations
 
@@ -16,9 +17,9 @@ from depthq.errors import ConfigError
 class OUConfig:
     """x_t = x_{t−1} + theta·(mu − x_{t−1}) + sigma·N(0, 1) from x_0 = 0;  command a_t = scale·x_t.
 
-    As in the original code (SPEC §1.3) the command is not clipped (stationary std ≈ 0.96 rad/s, up
-    to ≈ 3 rad/s) and the first one is already scale·N(0, 1); the stored label is clipped later
-    (`DataConfig.action_clip`), the robot's own limit is `WorldConfig.max_yaw_rate`.
+    As in the original code (docs/design.md#exploration) the command is not clipped (stationary std
+    ≈ 0.96 rad/s, up to ≈ 3 rad/s) and the first one is already scale·N(0, 1); the stored label is
+    clipped later (`DataConfig.action_clip`), the robot's own limit is `WorldConfig.max_yaw_rate`.
     """
 
     theta: float = 0.05

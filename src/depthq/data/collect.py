@@ -1,4 +1,4 @@
-"""Data collection (SPEC §1.3): OU exploration runs in fresh canyons, written as a run dataset.
+"""Data collection (docs/design.md#recorder): OU exploration runs in fresh canyons, written as a run dataset.
 
 As in the original recorder: the OU command drives the robot unclipped (up to the TurtleBot3's
 2.84 rad/s), the bump check runs from the first step, the first `skip_frames` frames of every run

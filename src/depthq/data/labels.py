@@ -1,4 +1,4 @@
-"""Which frames of a run are training samples, and their labels (SPEC §1.4). Pure NumPy.
+"""Which frames of a run are training samples, and their labels (docs/design.md#labels). Pure NumPy.
 
 Frames 0..N-2 have an action, so they are the samples; frame N-1 is where the run ended. The
 last `horizon` samples of a run are labelled 1 (Coll-Q-Net's target) if the run's end counts as a

@@ -1,4 +1,4 @@
-"""The paper's nested training subsets: "the first n usable training runs" (SPEC §1.4, Table II).
+"""The paper's nested training subsets: "the first n usable training runs" (docs/design.md#subsets, Table II).
 
 n counts usable runs (at least `min_frames` frames), so a subset of 50 trains on 50 runs, and the
 subset of 50 is the start of the subset of 100, and so on. Runs are taken in index order and only

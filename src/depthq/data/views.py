@@ -6,7 +6,7 @@ A view is the sample list of one split (or nested subset) for one network:
     kind "coll"   (image_t, a_t, y_t)           Coll-Q-Net; every frame with an action
 
 `view_arrays` gives everything but the images as NumPy arrays, samples ordered by run then frame,
-with `run_offsets` so that "a random run, then a random frame of it" (SPEC §1.6) can be drawn on
+with `run_offsets` so that "a random run, then a random frame of it" (docs/design.md#sampling) can be drawn on
 precomputed trunk features as well (`run_then_frame`). `DepthView`/`CollView` add the images,
 decoded on demand from run files opened lazily (a bounded number per process, reopened after a
 fork), so a 900-run dataset never sits in memory. Draw their batches with `view.sampler(...)`.
@@ -82,7 +82,8 @@ def view_arrays(
 def run_then_frame(run_offsets: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """`n` sample indices, each from a uniformly random run, then a uniformly random sample of that run.
 
-    Short runs are drawn as often as long ones (SPEC §1.6), so a sample of a short run weighs more.
+    Short runs are drawn as often as long ones (docs/design.md#sampling), so a sample of a short run
+    weighs more.
     """
     runs = rng.integers(len(run_offsets) - 1, size=n)
     starts = run_offsets[runs]
@@ -133,7 +134,7 @@ class FrameView(TorchDataset):
         return image, self.arrays["action"][i], self.arrays["target"][i]
 
     def sampler(self, num_samples: int, seed: int) -> RunThenFrameSampler:
-        """Random run, then random frame (SPEC §1.6), reproducible from `seed`."""
+        """Random run, then random frame (docs/design.md#sampling), reproducible from `seed`."""
         return RunThenFrameSampler(self.arrays["run_offsets"], num_samples, seed)
 
     def _reader(self, run_id: int) -> RunReader:

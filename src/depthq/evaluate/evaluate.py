@@ -1,4 +1,4 @@
-"""Drive a policy once in each evaluation canyon; metrics, trajectories, maps (SPEC §1.8).
+"""Drive a policy once in each evaluation canyon; metrics, trajectories, maps (docs/design.md#evaluation).
 
 Each canyon is driven in a worker process with one torch thread and sensor noise seeded by the
 canyon index, so the results are the same whatever the number of workers.

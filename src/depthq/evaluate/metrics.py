@@ -1,4 +1,4 @@
-"""Table I's per-run and per-policy metrics, as pure functions (SPEC §1.8)."""
+"""Table I's per-run and per-policy metrics, as pure functions (docs/design.md#metrics)."""
 
 from __future__ import annotations
 

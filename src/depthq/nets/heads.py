@@ -1,4 +1,4 @@
-"""The Depth-Q-Net and Coll-Q-Net heads (SPEC §1.5), and `QNet`, a trunk plus a head.
+"""The Depth-Q-Net and Coll-Q-Net heads (docs/design.md#heads), and `QNet`, a trunk plus a head.
 
 Both heads see (feature, action): dropout 0.5 on the feature, the raw action scalar appended, then
 FC 4096 + ReLU. Depth-Q-Net ends in FC 26 + ReLU (the depth bins one step later, in metres);

@@ -8,7 +8,7 @@ import torch.nn.functional as F
 
 from depthq.errors import ConfigError
 
-DEPTH_CLIP = 2.0  # metres; SPEC §1.2
+DEPTH_CLIP = 2.0  # metres; docs/design.md#bins
 CLIP_TOLERANCE = 1e-6  # a target within this of the clip counts as "at the clip" (float32 round-off)
 DEPTH_LOSSES = ("original", "valid_mean")
 
@@ -23,7 +23,7 @@ def depth_l1_loss(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """L1 over valid bins → (batch loss, per-sample loss (B,)).
 
-    "original" is the authors' loss (SPEC §1.4): weight 1 where 0.001 < target < clip, then a
+    "original" is the authors' loss (docs/design.md#losses): weight 1 where 0.001 < target < clip, then a
     2-wide min-pool of the weights (a bin next to an excluded one on its right is dropped too),
     and the weighted L1 averaged over all bins; the batch loss is the mean of the samples'.
 

@@ -1,8 +1,8 @@
 """MobileNet-v1 at width 0.25, the paper's trunk, up to its last pointwise conv.
 
 No registry package ships its ImageNet weights, so here it starts from random weights and is trained
-together with the head (SPEC §2). At 128 px the last map is 4 × 4 × 256; its global average is the
-256-d feature.
+together with the head (docs/deviations.md#trunk). At 128 px the last map is 4 × 4 × 256; its global
+average is the 256-d feature.
 """
 
 from __future__ import annotations

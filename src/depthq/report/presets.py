@@ -53,7 +53,7 @@ PRESETS: dict[str, Sweep] = {
         time_limit_s=45.0,
     ),
 }
-# The paper's table at the camera's nominal 10 Hz, to compare with the calibrated rate (README).
+# The paper's table at the camera's nominal 10 Hz, to compare with the calibrated rate (docs/calibration.md).
 PRESETS["nominal"] = replace(PRESETS["paper"], name="nominal", decision_hz=NOMINAL_DECISION_HZ)
 
 

@@ -5,8 +5,8 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
 - `stats`: OU exploration runs without a camera (the LiDAR decides when a run ends), at each
   candidate decision rate: frames per kept run, the share of runs kept, and the samples that
   Table II's sizes would get, next to the paper's. This is how the decision rate is calibrated.
-- `oracle`: the selection rule of SPEC §1.7 fed with the simulator's true next bins for each
-  candidate action (a perfect Depth-Q-Net), driven in `val` canyons: what the rule can reach at
+- `oracle`: the selection rule (docs/design.md#action-selection) fed with the simulator's true next
+  bins for each candidate action (a perfect Depth-Q-Net), driven in `val` canyons: what the rule can reach at
   a rate, whatever the network.
 - `dqn`: a small dataset collected at a rate, one Depth-Q-Net trained on it and driven in `val`
   canyons (at the data's rate): the end-to-end check, in a few minutes.

@@ -4,7 +4,7 @@ tables, figures, report.
 Output folder:
 
     OUT/reproduce.json            the sweep (a preset, or a widened one) and package version of the folder
-    OUT/data/                     the dataset (see README "Dataset on disk") and its feature cache
+    OUT/data/                     the dataset (docs/formats.md#dataset) and its feature cache
     OUT/models/<model>/           checkpoints, e.g. models/depth_n200_s1 (see depthq.report.layout and
                                   depthq.train.checkpoint)
     OUT/eval/<name>/              evaluations: summary.json, runs.csv, trajectories (+ heuristic, ou)

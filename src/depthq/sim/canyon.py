@@ -1,4 +1,4 @@
-"""Random canyons (SPEC §1.1): a pure function of (stream, index) → wall polylines.
+"""Random canyons (docs/design.md#canyons): a pure function of (stream, index) → wall polylines.
 
 A canyon is two walls: the left wall is a polyline of `n_segments` straight pieces that starts at
 (−1.5, 0) and heads along +y; each piece has a length ~ U(0.3, 0.7) m and a heading
@@ -29,7 +29,7 @@ N_EVAL_CANYONS = 20
 
 @dataclass(frozen=True)
 class CanyonConfig:
-    """Generator parameters, defaults exactly as in the original system (SPEC §1.1)."""
+    """Generator parameters, defaults exactly as in the original system (docs/design.md#canyons)."""
 
     n_segments: int = 150
     segment_length: tuple[float, float] = (0.3, 0.7)

@@ -1,4 +1,5 @@
-"""LiDAR post-processing as pure functions of a scan (SPEC §1.2): depth bins and the bump rule.
+"""LiDAR post-processing as pure functions of a scan: depth bins and the bump rule
+(docs/design.md#bins, docs/design.md#bump).
 
 A scan is 360 readings; index i is the bearing i degrees counter-clockwise from straight ahead
 (so index 90 looks left, index 270 right). `inf` is "no return within range", 0 or NaN is an
@@ -42,7 +43,7 @@ class BinConfig:
     """The 26 depth bins: 104 readings from +51° to −52°, clipped at 2 m, averaged in groups of 4.
 
     `invalid_as_far`: the original recorder stored a reading of 0 or no return as 5 m, so after the
-    clip it is far, never invalid (SPEC §1.2). False keeps such readings out of the mean (NaN bins).
+    clip it is far, never invalid (docs/design.md#bins). False keeps such readings out of the mean (NaN bins).
     """
 
     first_bearing: int = 51

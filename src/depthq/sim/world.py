@@ -25,7 +25,7 @@ from depthq.sim.mjcf import (
 from depthq.sim.sensors import LidarConfig, finish_scan, ray_directions
 
 APPEARANCES = ("default", "randomized")
-NOMINAL_DECISION_HZ = 10.0  # the TurtleBot3 camera's nominal frame rate (SPEC §1.2)
+NOMINAL_DECISION_HZ = 10.0  # the TurtleBot3 camera's nominal frame rate (docs/design.md#decision-rate)
 DEFAULT_DECISION_HZ = 4.0  # calibrated against Table II's frames per run (docs/calibration.md)
 TURTLEBOT3_MAX_YAW_RATE = 2.84  # rad/s, the Burger's maximum angular velocity
 
@@ -41,7 +41,8 @@ class WorldConfig:
     speed: float = 0.5  # m/s, constant
     max_yaw_rate: float = 1.0  # rad/s; commanded yaw rates are clipped to ±this
     # One decision per camera frame. The original camera is nominally 10 Hz, but the rate at which
-    # its frames were really saved is unknown; DEFAULT_DECISION_HZ is calibrated to Table II (README).
+    # its frames were really saved is unknown; DEFAULT_DECISION_HZ is calibrated to Table II
+    # (docs/calibration.md).
     decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005
     appearance: str = "default"

@@ -1,4 +1,4 @@
-"""Training batches of one view, "a random run, then a random frame of it" (SPEC §1.6).
+"""Training batches of one view, "a random run, then a random frame of it" (docs/design.md#sampling).
 
 Two sources with one interface, so the training loop does not care which trunk it trains:
 
