@@ -17,9 +17,37 @@ from depthq.errors import ConfigError
 T = TypeVar("T")
 
 
+# Field metadata of a setting added after artifacts were written without it: `to_dict` leaves it out
+# while it holds its default, so configs that do not use it keep their bytes (and old manifests match).
+OMIT_DEFAULT = {"omit_default": True}
+
+
 def to_dict(config: Any) -> dict[str, Any]:
-    """A JSON-ready dict of a (nested) dataclass; tuples become lists."""
-    return json.loads(json.dumps(dataclasses.asdict(config)))
+    """A JSON-ready dict of a (nested) dataclass; tuples become lists; `OMIT_DEFAULT` fields at their
+    default are left out (`from_dict` restores them)."""
+    return json.loads(json.dumps(_as_dict(config)))
+
+
+def _as_dict(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        out = {}
+        for f in dataclasses.fields(value):
+            item = getattr(value, f.name)
+            if f.metadata.get("omit_default") and item == _default(f):
+                continue
+            out[f.name] = _as_dict(item)
+        return out
+    if isinstance(value, tuple | list):
+        return [_as_dict(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_dict(v) for k, v in value.items()}
+    return value
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
 
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
