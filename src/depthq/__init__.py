@@ -1,4 +1,23 @@
-"""depthq: learn monocular collision avoidance from future depth (Depth-Q-Net) or collisions (Coll-Q-Net)."""
+"""depthq: learn monocular collision avoidance from future depth (Depth-Q-Net) or collisions (Coll-Q-Net).
+
+Layers, each importing only from those before it (tests/test_layers.py checks the source):
+
+    errors, configio, parallel              base: no layer below
+    ← sim                                   canyons, MuJoCo world, sensors, the Gymnasium env
+    ← control                               the Policy interface, OU exploration, the depth heuristic,
+                                            action selection rules (collection drives them)
+    ← data                                  collection and the on-disk datasets, ROS 2 bags
+    ← nets                                  trunks, heads, losses, optimizer, checkpoints read back
+    ← control.qnet_policy, .onnx_policy,    the learned policies (torch or onnxruntime) and
+      .registry                             `make_policy`, which builds any policy from its name
+    ← train
+    ← evaluate | deploy                     online evaluation | ONNX export and the robot step
+    ← report | bench                        the reproduction pipeline | `depthq bench` figures
+    ← scripts ← cli                         one module per verb, the `depthq` command
+
+Units on one line (`|`) do not import each other. This root module runs first and imports only
+`depthq.sim`'s `__init__` (the env's name); any module may import it for `__version__`.
+"""
 
 import os
 

@@ -1,4 +1,4 @@
-"""Measure the speed targets of SPEC §4 (benchmarks, never timed tests); the last line is the figure."""
+"""Measure the speed targets (benchmarks, never timed tests); the last line is the figure."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     if args.what == "sim":
         _positive("--steps", args.steps)
         _positive("--workers", args.workers)
-        from depthq.sim.bench import bench_sim
+        from depthq.bench.sim import bench_sim  # mujoco: off the CLI's startup
 
         r = bench_sim(args.steps, args.workers)
         return (
@@ -57,7 +57,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     if args.what == "collect":
         _positive("--runs", args.runs)
         _positive("--workers", args.workers)
-        from depthq.data.bench import bench_collect
+        from depthq.bench.collect import bench_collect  # mujoco: off the CLI's startup
 
         r = bench_collect(args.runs, tuple(sorted({1, args.workers})))
         last = r[f"w{args.workers}"]
@@ -67,7 +67,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         )
     if args.what == "features":
         _positive("--frames", args.frames)
-        from depthq.train.bench import bench_features
+        from depthq.bench.features import bench_features  # torch: off the CLI's startup
 
         r = bench_features(args.data, n=args.frames, device=args.device)
         return (
@@ -76,7 +76,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         )
     if args.what == "train":
         _positive("--seconds", args.seconds)
-        from depthq.train.bench import bench_train
+        from depthq.bench.train import bench_train  # torch: off the CLI's startup
 
         r = bench_train(args.seconds, device=args.device)
         return r, (
@@ -84,7 +84,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"{r['matmul_gflops']} GFLOP/s"
         )
     _positive("--decisions", args.decisions)
-    from depthq.evaluate.bench import bench_policy
+    from depthq.bench.policy import bench_policy  # torch, mujoco: off the CLI's startup
 
     r = bench_policy(args.policy, args.decisions, device=args.device)
     each = [f"{p['policy']}: {p['ms_median']} ms median ({p['ms_p90']} ms p90)" for p in r["policies"]]

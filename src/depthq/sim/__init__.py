@@ -2,7 +2,7 @@
 
 import gymnasium
 
-import depthq  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
+# No `import depthq` here: Python runs the package root (which sets MUJOCO_GL) before this.
 
 ENV_ID = "depthq/Canyon-v0"
 

@@ -4,5 +4,5 @@ Modules, one concept each: `config` (every hyper-parameter, `TrainConfig`), `fea
 on-disk cache of frozen-trunk features), `samples` (training batches from cached features or from
 images), `checkpoint` (writing the output folder: weights, resume state, metrics; reading a network
 back is `depthq.nets.checkpoint.load_qnet`), `trainer`
-(the loop, `train`), `bench` (speed of head training and of feature extraction).
+(the loop, `train`). Their speed is measured by `depthq.bench.train` and `depthq.bench.features`.
 """

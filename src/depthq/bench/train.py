@@ -1,26 +1,22 @@
-"""Speed of the two halves of training (SPEC §4): head training on cached features, and feature
-extraction end to end (JPEG decode + resize + frozen trunk)."""
+"""Head training speed on cached features: samples/s and the FLOP/s it reaches as a fraction of matmul's.
+(The other half of training, feature extraction, is `depthq.bench.features`.)"""
 
 from __future__ import annotations
 
-import itertools
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
-from depthq.data.manifest import Dataset
 from depthq.nets.device import resolve_device
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
+from depthq.nets.trunk import build_trunk
 from depthq.parallel import cores
 from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig
-from depthq.train.features import BATCH as DECODE_BATCH
-from depthq.train.features import FeatureTable, frame_batches, prefetch, trunk_threads
+from depthq.train.features import FeatureTable
 from depthq.train.samples import FeatureSamples
 from depthq.train.trainer import train_step
 
@@ -91,28 +87,6 @@ def bench_train(seconds: float = 10.0, device: str = "auto") -> dict[str, float]
         "ratio_actual": round(actual * samples_per_s / matmul_flops, 3),
         "seconds": round(head_s + matmul_s, 2),
     }
-
-
-def bench_features(
-    data: Path, n: int = 512, size: int = 128, trunk: str = DEFAULT_TRUNK, device: str = "auto"
-) -> dict:
-    """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
-    resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
-    torch.set_num_threads(trunk_threads())
-    dataset = Dataset.open(Path(data))
-    where = resolve_device(device)
-    net = build_trunk(trunk).to(where)
-    frames = 0
-    with torch.inference_mode():
-        net(torch.rand(16, 3, size, size, device=where)).cpu()  # warm-up
-        start = time.perf_counter()
-        for batch in prefetch(itertools.islice(frame_batches(dataset, size), -(-n // DECODE_BATCH)), depth=2):
-            net(batch.to(where)).cpu()  # to the cache's memory, as `compute_features` does
-            frames += len(batch)
-        seconds = time.perf_counter() - start
-    return {"trunk": trunk, "device": str(where), "input_size": size, "frames": frames,
-            "seconds": round(seconds, 2), "frames_per_s": round(frames / seconds, 1),
-            "threads": torch.get_num_threads()}
 
 
 def _timed(fn, seconds: float) -> tuple[int, float]:

@@ -8,7 +8,12 @@ import numpy as np
 import torch
 
 from depthq.control.qnet_policy import QNetPolicy
+from depthq.control.registry import make_policy
+from depthq.nets.device import resolve_device
+from depthq.nets.heads import HeadConfig, QNet, build_head
+from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.parallel import cores
+from depthq.sim.env import CanyonEnv
 
 
 def bench_policy(specs: list[str] | None = None, decisions: int = 200, device: str = "auto") -> dict:
@@ -18,12 +23,6 @@ def bench_policy(specs: list[str] | None = None, decisions: int = 200, device: s
     Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
     """
-    from depthq.control.registry import make_policy
-    from depthq.nets.device import resolve_device
-    from depthq.nets.heads import HeadConfig, QNet, build_head
-    from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
-    from depthq.sim.env import CanyonEnv
-
     where = str(resolve_device(device))
     torch.set_num_threads(cores())
     if specs:

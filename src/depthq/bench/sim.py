@@ -8,11 +8,11 @@ import time
 
 import numpy as np
 
+from depthq.control.ou import OUPolicy
+from depthq.sim.env import CanyonEnv
+
 
 def _worker(steps: int, seed: int, queue) -> None:
-    from depthq.control.ou import OUPolicy
-    from depthq.sim.env import CanyonEnv
-
     env = CanyonEnv()
     policy = OUPolicy(seed=seed)
     index = seed * 10_000

@@ -1,0 +1,37 @@
+"""Feature extraction speed end to end: JPEG decode + resize + the frozen trunk, on a dataset's frames."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from pathlib import Path
+
+import torch
+
+from depthq.data.manifest import Dataset
+from depthq.nets.device import resolve_device
+from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
+from depthq.train.features import BATCH as DECODE_BATCH
+from depthq.train.features import frame_batches, prefetch, trunk_threads
+
+
+def bench_features(
+    data: Path, n: int = 512, size: int = 128, trunk: str = DEFAULT_TRUNK, device: str = "auto"
+) -> dict:
+    """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
+    resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them."""
+    torch.set_num_threads(trunk_threads())
+    dataset = Dataset.open(Path(data))
+    where = resolve_device(device)
+    net = build_trunk(trunk).to(where)
+    frames = 0
+    with torch.inference_mode():
+        net(torch.rand(16, 3, size, size, device=where)).cpu()  # warm-up
+        start = time.perf_counter()
+        for batch in prefetch(itertools.islice(frame_batches(dataset, size), -(-n // DECODE_BATCH)), depth=2):
+            net(batch.to(where)).cpu()  # to the cache's memory, as `compute_features` does
+            frames += len(batch)
+        seconds = time.perf_counter() - start
+    return {"trunk": trunk, "device": str(where), "input_size": size, "frames": frames,
+            "seconds": round(seconds, 2), "frames_per_s": round(frames / seconds, 1),
+            "threads": torch.get_num_threads()}
