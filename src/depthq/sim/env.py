@@ -1,5 +1,5 @@
 """The task (dm_control's "task"): drive at constant speed through a canyon until a bump, a
-contact with a wall or the time limit. Gymnasium env `depthq/Canyon-v0`.
+contact with a wall, the canyon's open end or the time limit. Gymnasium env `depthq/Canyon-v0`.
 
 Observation: {"image": uint8 (308, 410, 3) camera frame with pixel noise,
               "scan": float32 (360,) LiDAR (index = bearing in degrees, CCW; inf = nothing in range,
@@ -8,6 +8,9 @@ Observation: {"image": uint8 (308, 410, 3) camera frame with pixel noise,
 Action: yaw rate in rad/s, shape (1,), clipped to ±`world.max_yaw_rate` (1 by default); +a turns left.
 One step is one camera frame: `world.decision_hz` decisions per second.
 Reward: metres gained on the furthest straight-line distance from the spawn point (what Table I measures).
+The world is built for the family of the canyon a reset loads (`depthq.sim.world.world_for`).
+Info also tracks `progress` (furthest point reached along the canyon's centre line, m) and `closest`
+(the smallest noise-free ray-cast distance from the LiDAR to a wall or pillar so far, m).
 """
 
 from __future__ import annotations
@@ -21,12 +24,13 @@ import numpy as np
 from gymnasium import spaces
 
 from depthq.errors import ConfigError
-from depthq.sim.canyon import CANYON_ENTROPY, STREAMS, CanyonId, generate_canyon
+from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.sensors import BinConfig, BumpConfig, bump, depth_bins
-from depthq.sim.world import CanyonWorld, WorldConfig
+from depthq.sim.world import CanyonWorld, WorldConfig, world_for
 
 SPAWN = (0.0, 0.0, math.pi / 2)  # (x, y, yaw): at the origin, facing +y
-END_REASONS = ("bump", "contact", "time_limit")
+COLLISIONS = ("bump", "contact")
+END_REASONS = (*COLLISIONS, "end", "time_limit")  # "end": the canyon's open end reached
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,7 @@ class CanyonEnv(gym.Env):
         )
         limit = self.config.world.max_yaw_rate
         self.action_space = spaces.Box(-limit, limit, (1,), np.float32)
+        self._camera = camera
         self.world = CanyonWorld(self.config.world, render=camera)
         self._black = None if camera else np.zeros(self.observation_space["image"].shape, np.uint8)
         self.dt = self.config.world.period
@@ -92,17 +97,22 @@ class CanyonEnv(gym.Env):
         if "canyon" in options:
             canyon_id = parse_canyon(options["canyon"])
         else:
-            canyon_id = CanyonId("train", int(self.np_random.integers(0, 2**31 - 1)))
+            index = int(self.np_random.integers(0, 2**31 - 1))
+            canyon_id = CanyonId("train", index, self.config.world.family)
         if canyon_id != self.canyon_id:
-            appearance = np.random.default_rng(
-                [CANYON_ENTROPY, STREAMS[canyon_id.stream], canyon_id.index, 1]
-            )
-            self.world.load(generate_canyon(canyon_id, self.config.world.canyon), appearance)
+            world = world_for(self.config.world, canyon_id.family)
+            if world != self.world.config:  # another family: its own walls, pillars and look
+                self.world.close()
+                self.world = CanyonWorld(world, render=self._camera)
+            appearance = np.random.default_rng(canyon_id.appearance_seed)
+            self.world.load(generate_canyon(canyon_id, world.canyon), appearance)
             self.canyon_id = canyon_id
         self.world.place(*SPAWN)
         self.time = 0.0
         self.path_length = 0.0
         self.distance = 0.0
+        self.progress = 0.0
+        self.closest = self.config.world.lidar.range_max + 1.0  # the ray cast's reach
         self.trajectory = [self.world.pose]
         self._obs = self._observe()
         return self._obs, self._info(None)
@@ -123,19 +133,27 @@ class CanyonEnv(gym.Env):
         self.path_length += float(np.hypot(*(pose[:2] - before[:2])))
         gained = max(0.0, float(np.hypot(*(pose[:2] - SPAWN[:2]))) - self.distance)
         self.distance += gained
+        canyon = self.world.canyon
+        progress = canyon.progress(pose[:2])
+        self.progress = max(self.progress, progress)
         self._obs = self._observe()
         reason = None
         if contact:
             reason = "contact"
         elif self.time >= self.config.bump.grace_s - 1e-9 and bump(self._obs["scan"], self.config.bump):
             reason = "bump"
+        elif progress >= canyon.length:
+            reason = "end"
         elif self.time >= self.config.time_limit_s - 1e-9:
             reason = "time_limit"
-        terminated = reason in ("bump", "contact")
+        terminated = reason in (*COLLISIONS, "end")
         return self._obs, gained, terminated, reason == "time_limit", self._info(reason)
 
     def _observe(self) -> dict[str, np.ndarray]:
         scan = self.world.scan(self.np_random)
+        hits = self.world.last_raycast[self.world.last_raycast >= 0]
+        if len(hits):
+            self.closest = min(self.closest, float(hits.min()))
         return {
             "image": self.world.image(self.np_random) if self._black is None else self._black,
             "scan": scan,
@@ -148,6 +166,9 @@ class CanyonEnv(gym.Env):
             "time": self.time,
             "path_length": self.path_length,
             "distance": self.distance,
+            "progress": self.progress,
+            "closest": self.closest,
+            "canyon_length": self.world.canyon.length,
             "canyon": str(self.canyon_id),
             "end_reason": end_reason,
         }

@@ -1,8 +1,9 @@
 """MJCF of the world: a fixed number of wall boxes (a canyon is written into them later), the ground,
 a sun-like light, and the TurtleBot3 Burger with its camera and LiDAR frame.
 
-The wall count depends only on `CanyonConfig.n_segments`: `CanyonWorld.load` moves the boxes in the
-parsed spec and recompiles (< 1 ms), and one renderer serves every canyon.
+The wall count depends only on `CanyonConfig.n_segments` (and the pillars' on `obstacles.count`):
+`CanyonWorld.load` moves them in the parsed spec and recompiles (< 1 ms), and one renderer serves
+every canyon of a family.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ ROBOT_GROUP = 1
 GROUND_GROUP = 2
 WALL_THICKNESS = 0.02
 WALL_HEIGHT = 4.0
+OBSTACLE_RGBA = "0.45 0.30 0.22 1"
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,13 @@ def build_mjcf(
         f'    <geom name="wall{i}" type="box" size="0.1 {WALL_THICKNESS / 2} {WALL_HEIGHT / 2}" '
         f'pos="0 {-10 - i} {WALL_HEIGHT / 2}" rgba="0.62 0.62 0.62 1" group="{WALL_GROUP}"/>'
         for i in range(n_walls)
+    )
+    # Pillars (none in the paper's canyons, whose MJCF stays as it was), parked like the walls.
+    ob = canyon.obstacles
+    walls += "".join(
+        f'\n    <geom name="obstacle{i}" type="cylinder" size="{ob.radius} {ob.height / 2}" '
+        f'pos="0 {-10 - n_walls - i} {ob.height / 2}" rgba="{OBSTACLE_RGBA}" group="{WALL_GROUP}"/>'
+        for i in range(ob.count)
     )
     hl, hw, h = robot.length / 2, robot.width / 2, robot.body_height
     sx, r = robot.sensor_offset_x, robot.wheel_radius

@@ -4,15 +4,16 @@ walls, velocity-controlled driving, the camera and the LiDAR. No rewards, no ter
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 
 import mujoco
 import numpy as np
 
+from depthq.configio import OMIT_DEFAULT
 from depthq.errors import ConfigError
 from depthq.sim.camera import OffscreenCamera
-from depthq.sim.canyon import Canyon, CanyonConfig
+from depthq.sim.canyon import FAMILIES, PAPER, Canyon, CanyonConfig
 from depthq.sim.mjcf import (
     ROBOT_GROUP,
     WALL_GROUP,
@@ -46,6 +47,8 @@ class WorldConfig:
     decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005
     appearance: str = "default"
+    # The canyon family whose canyons `canyon` generates (`depthq.sim.canyon.FAMILIES`, `world_for`).
+    family: str = field(default=PAPER, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:
         if not self.speed > 0:
@@ -64,6 +67,8 @@ class WorldConfig:
             )
         if self.appearance not in APPEARANCES:
             raise ConfigError(f"unknown appearance {self.appearance!r}; expected one of {APPEARANCES}")
+        if self.family not in FAMILIES:
+            raise ConfigError(f"unknown canyon family {self.family!r}; expected one of {sorted(FAMILIES)}")
 
     @property
     def substeps(self) -> int:
@@ -73,6 +78,17 @@ class WorldConfig:
     def period(self) -> float:
         """Seconds between two decisions (camera frames): a whole number of physics steps."""
         return self.substeps * self.physics_dt
+
+
+def world_for(world: WorldConfig, family: str) -> WorldConfig:
+    """`world` for another canyon family: that family's generator and look, the same robot, sensors
+    and rates. A world already of `family` is returned as it is (its canyon config may be a variant)."""
+    if family not in FAMILIES:
+        raise ConfigError(f"unknown canyon family {family!r}; expected one of {sorted(FAMILIES)}")
+    if world.family == family:
+        return world
+    spec = FAMILIES[family]
+    return replace(world, canyon=spec.canyon, appearance=spec.appearance, family=family)
 
 
 def _noise_table(std_levels: float) -> np.ndarray:
@@ -99,8 +115,11 @@ class CanyonWorld:
         xml = build_mjcf(config.canyon, config.camera, config.robot, config.lidar, config.physics_dt)
         self._spec = mujoco.MjSpec.from_string(xml)
         self._walls = [self._spec.geom(f"wall{i}") for i in range(self._n_walls)]
+        self._obstacles = [self._spec.geom(f"obstacle{i}") for i in range(config.canyon.obstacles.count)]
+        self._parked = [np.array(g.pos) for g in self._obstacles]
         self._default_wall_rgba = np.array(self._walls[0].rgba)
         self._default_ground_rgba = np.array(self._spec.geom("ground").rgba)
+        self._default_pillar_rgba = np.array(self._obstacles[0].rgba) if self._obstacles else None
         self._default_sun_dir = np.array(self._spec.light("sun").dir)
         self.model = self._spec.compile()
         self.data = mujoco.MjData(self.model)
@@ -110,6 +129,7 @@ class CanyonWorld:
         self._rays[:, :2] = ray_directions(config.lidar.n_rays)
         self._ray_geom = np.zeros(config.lidar.n_rays, np.int32)
         self._ray_dist = np.zeros(config.lidar.n_rays)
+        self.last_raycast = np.full(config.lidar.n_rays, -1.0)  # the noise-free distances of the last scan
         self._geomgroup = np.zeros(6, np.uint8)
         self._geomgroup[WALL_GROUP] = 1
         self._noise = _noise_table(255.0 * config.camera.noise_std)
@@ -135,23 +155,32 @@ class CanyonWorld:
         half = np.linalg.norm(b - a, axis=1) / 2
         yaw = np.arctan2(b[:, 1] - a[:, 1], b[:, 0] - a[:, 0])
         mid = (a + b) / 2
-        rgba = self._appearance(appearance_rng)
+        rgba, pillar_rgba = self._appearance(appearance_rng)
         for k, geom in enumerate(self._walls):
             geom.pos = (mid[k, 0], mid[k, 1], WALL_HEIGHT / 2)
             geom.quat = (math.cos(yaw[k] / 2), 0.0, 0.0, math.sin(yaw[k] / 2))
             geom.size = (half[k], WALL_THICKNESS / 2, WALL_HEIGHT / 2)
             geom.rgba = rgba[k]
+        if len(canyon.obstacles) > len(self._obstacles):
+            raise ConfigError(
+                f"canyon has {len(canyon.obstacles)} pillars, the world was built for {len(self._obstacles)}"
+            )
+        for k, geom in enumerate(self._obstacles):  # pillars the canyon left out stay parked
+            placed = k < len(canyon.obstacles)
+            geom.pos = (*canyon.obstacles[k, :2], geom.pos[2]) if placed else self._parked[k]
+            geom.rgba = pillar_rgba
         self.model = self._spec.compile()
         self.data = mujoco.MjData(self.model)
         self.canyon = canyon
 
-    def _appearance(self, rng: np.random.Generator | None) -> np.ndarray:
+    def _appearance(self, rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
         """Wall colours (and, randomised, ground colour and sun direction) for the next canyon."""
         ground, sun = self._spec.geom("ground"), self._spec.light("sun")
         rgba = np.tile(self._default_wall_rgba, (self._n_walls, 1))
+        pillar = self._default_pillar_rgba
         if self.config.appearance == "default" or rng is None:
             ground.rgba, sun.dir = self._default_ground_rgba, self._default_sun_dir
-            return rgba
+            return rgba, pillar
         # Domain randomisation: one colour per wall side, a ground colour and a sun direction per canyon.
         n_side = self.config.canyon.n_segments + 1
         side_colours = rng.uniform(0.15, 0.95, size=(3, 3))
@@ -162,7 +191,9 @@ class CanyonWorld:
         ground.rgba = (*rng.uniform(0.1, 0.7, size=3), 1.0)
         d = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), -rng.uniform(0.5, 1.5)])
         sun.dir = d / np.linalg.norm(d)
-        return rgba
+        if self._obstacles:  # drawn last: a canyon without pillars looks as before
+            pillar = np.array([*rng.uniform(0.1, 0.9, size=3), 1.0])
+        return rgba, pillar
 
     def place(self, x: float, y: float, yaw: float) -> None:
         """Put the robot at a pose, at rest."""
@@ -218,7 +249,8 @@ class CanyonWorld:
 
     def scan(self, rng: np.random.Generator) -> np.ndarray:
         """A LiDAR reading: ray cast, Gaussian noise, range limits (see `sensors.finish_scan`)."""
-        return finish_scan(self.raycast(), self.config.lidar, rng)
+        self.last_raycast = self.raycast()
+        return finish_scan(self.last_raycast, self.config.lidar, rng)
 
     def render(self) -> np.ndarray:
         """The camera frame without noise, uint8 (height, width, 3). The returned array is reused."""
