@@ -17,3 +17,62 @@ def test_help_of_the_command_and_of_every_verb(argv: list[str], capsys: pytest.C
     assert out.startswith("usage: depthq")
     if not argv:
         assert all(verb in out for verb in VERBS) and "95 % intervals" in out
+
+
+def test_every_train_config_field_is_a_flag_with_its_default(capsys: pytest.CaptureFixture[str]) -> None:
+    """The flags are made from TrainConfig: a field added there is a flag, its default the class's."""
+    from dataclasses import MISSING, fields
+
+    from depthq.cli import build_parser
+    from depthq.train.config import TrainConfig
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    out = capsys.readouterr().out
+    names = [f.name for f in fields(TrainConfig)]
+    assert all(f"--{name.replace('_', '-')}" in out for name in names)
+    args = build_parser("train").parse_args(["train", "--model", "depth", "--data", "d", "--out", "o"])
+    for f in fields(TrainConfig):
+        if f.default is not MISSING:
+            assert getattr(args, f.name) == f.default, f.name
+        elif f.default_factory is not MISSING:
+            assert getattr(args, f.name) == f.default_factory(), f.name
+
+
+def test_a_flag_sets_its_field_in_either_spelling() -> None:
+    """--action-scale (one of the headline deviations) had no flag; dashes or underscores both work,
+    and the old spellings (--depth-loss, --epochs, --lr, ...) still do."""
+    from depthq.cli import build_parser
+    from depthq.flags import config_from_args
+    from depthq.train.config import TrainConfig
+
+    argv = ["train", "--model", "coll", "--data", "d", "--out", "o", "--action-scale", "3", "--lr", "none",
+            "--depth_loss", "valid_mean", "--epochs", "7", "--no-every-run-end", "--action_lag", "1"]
+    config = config_from_args(TrainConfig, build_parser("train").parse_args(argv))
+    assert (config.model, config.data, config.action_scale, config.lr) == ("coll", "d", 3.0, None)
+    assert (config.depth_loss, config.epochs) == ("valid_mean", 7)
+    assert (config.every_run_end, config.action_lag) == (False, 1)
+
+
+def test_sweep_set_takes_the_flag_names_too() -> None:
+    from depthq.report.sweep import parse_setting
+
+    expected = ("action_scale", (1.0, 10.0))
+    assert parse_setting("action-scale=1,10") == parse_setting("action_scale=1,10") == expected
+
+
+@pytest.mark.parametrize(("argv", "named"), [
+    (["--epochs", "ten"], "'ten'"),
+    (["--every-run-end", "maybe"], "maybe"),
+])
+def test_a_bad_flag_value_is_named(argv: list[str], named: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["train", "--model", "depth", "--data", "d", "--out", "o", *argv])
+    assert exit_.value.code == 2 and named in capsys.readouterr().err
+
+
+def test_a_bad_config_value_exits_2_with_one_line(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--model", "depth", "--data", str(tmp_path), "--out", str(tmp_path / "o"),
+                 "--dropout", "1.5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "dropout" in err and "1.5" in err

@@ -2,7 +2,7 @@
 
 Layers, each importing only from those before it (tests/test_layers.py checks the source):
 
-    errors, configio, parallel              base: no layer below
+    errors, configio, parallel, flags       base: no layer below
     ← sim                                   canyons, MuJoCo world, sensors, the Gymnasium env
     ← control                               the Policy interface, OU exploration, the depth heuristic,
                                             action selection rules (collection drives them)

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import errno
 import importlib
+import os
 import sys
+import traceback
 
 from depthq import __version__
-from depthq.errors import ConfigError, DataError
+from depthq.errors import explain
+
+DEBUG_ENV = "DEPTHQ_DEBUG"
 
 # verb -> module in depthq.scripts; each module has `add_arguments(parser)` and `run(args) -> int`.
 VERBS: dict[str, str] = {
@@ -26,14 +29,18 @@ VERBS: dict[str, str] = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
+    """Every verb with its summary, and the flags of `verb` alone: building a verb's flags imports its
+    config classes (MuJoCo's for collect), which only that verb should pay for."""
     parser = argparse.ArgumentParser(
         prog="depthq",
         description="Monocular collision avoidance from future depth: collect, train, evaluate, reproduce.",
     )
     parser.add_argument("--version", action="version", version=f"depthq {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help=f"full tracebacks instead of one-line errors (also {DEBUG_ENV}=1)")
     sub = parser.add_subparsers(dest="verb", required=True, metavar="VERB")
-    for verb, module_name in VERBS.items():
+    for name, module_name in VERBS.items():
         try:
             module = importlib.import_module(f"depthq.scripts.{module_name}")
         except ModuleNotFoundError as err:
@@ -41,32 +48,31 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # verb not built yet
             raise
         summary = (module.__doc__ or "").strip().splitlines()[0]
-        p = sub.add_parser(verb, help=summary.replace("%", "%%"))  # argparse %-formats help texts
-        module.add_arguments(p)
+        p = sub.add_parser(name, help=summary.replace("%", "%%"))  # argparse %-formats help texts
+        if name == verb:
+            module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    verb = next((a for a in argv if not a.startswith("-")), None)  # the global flags take no value
+    args = build_parser(verb).parse_args(argv)
+    debug = args.debug or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
         return int(args._run(args) or 0)
-    except ConfigError as err:
-        print(f"depthq {args.verb}: error: {err}", file=sys.stderr)
-        return 2
-    except DataError as err:
-        print(f"depthq {args.verb}: data error: {err}", file=sys.stderr)
-        return 1
-    except OSError as err:
-        if err.errno != errno.ENOSPC:
-            raise
-        print(f"depthq {args.verb}: disk full ({err.filename or err}); nothing half-written is kept as a "
-              "result: free space and run the same command to resume.", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         print(f"depthq {args.verb}: interrupted; run the same command again to resume.", file=sys.stderr)
         return 130
+    except Exception as err:
+        status, line = explain(err)
+        if status is None:
+            raise  # a bug, not the input or the machine: the traceback is what helps
+        if debug:
+            traceback.print_exc()
+        print(f"depthq {args.verb}: {line}", file=sys.stderr)
+        return status
 
 
 if __name__ == "__main__":

@@ -138,6 +138,7 @@ def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     from depthq.train.config import TrainConfig
 
     key, sep, raw = text.partition("=")
+    key = key.strip().replace("-", "_")  # the flag's spelling (depthq train --action-scale) or the field's
     defaults = {f.name: f.default for f in fields(TrainConfig)}
     if not sep or not raw:
         raise ConfigError(f"--set takes FIELD=VALUE[,VALUE…], got {text!r}")

@@ -6,21 +6,23 @@ import argparse
 import time
 from pathlib import Path
 
+from depthq.flags import add_config_arguments, config_from_args
 from depthq.parallel import add_executor_arguments, executor_from
+
+# What --help adds to CollectConfig's own comments (its nested env, OU and data configs are not flags).
+_HELP = {"runs": "usable training runs", "val_runs": "usable validation runs (their own canyons)"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--runs", type=int, default=900, help="training runs")
-    p.add_argument("--val-runs", type=int, default=90, help="validation runs (their own canyons)")
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
     p.add_argument("--seed", type=int, default=0, help="collection seed (sensor and OU noise)")
-    p.add_argument(
-        "--max-steps", type=int, default=600, help="cut a run that never bumps after this many steps"
-    )
     p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
     add_executor_arguments(p)
+    from depthq.data.collect import CollectConfig  # MuJoCo: only when this verb's flags are built
+
+    add_config_arguments(p, CollectConfig, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -28,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from depthq.data.stats import dataset_stats, format_stats
 
     env = exploration_env() if args.hz is None else exploration_env(args.hz)
-    config = CollectConfig(runs=args.runs, val_runs=args.val_runs, max_steps=args.max_steps, env=env)
+    config = config_from_args(CollectConfig, args, env=env)
     start = time.perf_counter()
     executor = executor_from(args)
     dataset = collect(args.out, config, args.seed, args.workers, args.overwrite, executor=executor)

@@ -6,8 +6,17 @@ import argparse
 import json
 from pathlib import Path
 
+from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
+
+# EvalConfig's fields keep the flags they had before they were made from it; --canyons stays a
+# canyon set ('eval:0-4'), parsed by the verb.
+_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",)}
+_HELP = {
+    "time_limit_s": "seconds per run",
+    "decision_hz": "decisions per second",
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -15,31 +24,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--canyons", default="eval", help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
     )
-    p.add_argument(
-        "--hz", type=float, default=None,
-        help="decisions per second [a checkpoint's: its training data's; else the calibrated default]",
-    )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--time-limit", type=float, default=45.0, help="seconds per run")
-    p.add_argument("--which", default="best", help="checkpoint weights: best or last")
-    p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.add_argument("--no-video", action="store_true", help="skip video.mp4 of the first canyon")
     add_executor_arguments(p)
+    from depthq.evaluate.evaluate import EvalConfig  # MuJoCo: only when this verb's flags are built
+
+    add_config_arguments(p, EvalConfig, exclude=("canyons",), aliases=_ALIASES, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 
-    config = EvalConfig(
-        canyons=parse_canyon_set(args.canyons),
-        time_limit_s=args.time_limit,
-        seed=args.seed,
-        which=args.which,
-        decision_hz=args.hz,
-    )
+    config = config_from_args(EvalConfig, args, canyons=parse_canyon_set(args.canyons))
     result = evaluate(
         args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
         executor=executor_from(args),
