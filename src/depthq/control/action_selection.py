@@ -1,4 +1,4 @@
-"""Turning Q-net predictions into an action (SPEC §1.7), as pure functions.
+"""Turning Q-net predictions into an action (docs/design.md#action-selection), as pure functions.
 
 Depth-Q-Net: for each candidate action, the minimum predicted bin (bins predicted as exactly 0 are
 ignored: a ReLU output of 0 means "no prediction"); take the action whose closest obstacle is

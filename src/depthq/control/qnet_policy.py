@@ -1,5 +1,6 @@
 """A policy extracted from a trained Depth-Q-Net or Coll-Q-Net: one trunk pass per frame, all
-candidate actions through the head in one batch, then the selection rule of SPEC §1.7."""
+candidate actions through the head in one batch, then the selection rule
+(docs/design.md#action-selection)."""
 
 from __future__ import annotations
 

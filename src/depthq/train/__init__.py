@@ -1,4 +1,4 @@
-"""Off-policy training of Depth-Q-Net and Coll-Q-Net from one collected dataset (SPEC §1.6).
+"""Off-policy training of Depth-Q-Net and Coll-Q-Net from one collected dataset (docs/design.md#training).
 
 Modules, one concept each: `config` (every hyper-parameter, `TrainConfig`), `features` (the
 on-disk cache of frozen-trunk features), `samples` (training batches from cached features or from

@@ -13,10 +13,11 @@ from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
 
-# SPEC §1.6: Depth-Q-Net 0.1, Coll-Q-Net 0.01. Coll-Q-Net's 0.01 under-trains it in our 40-epoch budget
-# (the paper ran up to 1000): on 500 runs of the 4 Hz paper dataset, seed 0, its validation loss
-# (BCE over all validation samples) is 0.145 at 0.01 and 0.112 at 0.1; driven in val:1000-1019 it
-# goes 2.24 m at 0.01 and 3.06 m at 0.1 (docs/val_choices.py). Hence 0.1 for both.
+# The original's rates: Depth-Q-Net 0.1, Coll-Q-Net 0.01 (docs/design.md#training). Coll-Q-Net's 0.01
+# under-trains it in our 40-epoch budget (the paper ran up to 1000): on 500 runs of the 4 Hz paper
+# dataset, seed 0, its validation loss (BCE over all validation samples) is 0.145 at 0.01 and 0.112
+# at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1 (docs/val_choices.py).
+# Hence 0.1 for both.
 DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is
 # within 8 % of the best of 60 for Depth-Q-Net (0.151 vs 0.139 at 50) and 10 % for Coll-Q-Net (0.058
@@ -38,7 +39,8 @@ def _positive_float(name: str, value: object) -> None:
 class TrainConfig:
     """One training run: which network, on which data, with which optimizer and schedule.
 
-    An epoch is `train_batches` training batches then `val_batches` validation batches (SPEC §1.6).
+    An epoch is `train_batches` training batches then `val_batches` validation batches
+    (docs/design.md#training).
     `runs` takes the first n usable training runs (the paper's nested subsets); None takes all.
     `lr` None means the paper's rate for `model`; read the effective one from `learning_rate`.
     """

@@ -1,5 +1,6 @@
-"""The training loop (SPEC §1.6): epochs of `train_batches` Adadelta steps on batches drawn "a random
-run, then a random frame of it", then `val_batches` fixed validation batches; a checkpoint every epoch.
+"""The training loop (docs/design.md#training): epochs of `train_batches` Adadelta steps on batches
+drawn "a random run, then a random frame of it", then `val_batches` fixed validation batches; a
+checkpoint every epoch.
 """
 
 from __future__ import annotations
