@@ -58,12 +58,13 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     verb = next((a for a in argv if not a.startswith("-")), None)  # the global flags take no value
-    args = build_parser(verb).parse_args(argv)
-    debug = args.debug or os.environ.get(DEBUG_ENV, "") not in ("", "0")
+    before_verb = argv[: argv.index(verb)] if verb else argv
+    debug = "--debug" in before_verb or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
+        args = build_parser(verb).parse_args(argv)  # a verb's flags may load MuJoCo, and so fail
         return int(args._run(args) or 0)
     except KeyboardInterrupt:
-        print(f"depthq {args.verb}: interrupted; run the same command again to resume.", file=sys.stderr)
+        print(f"depthq {verb}: interrupted; run the same command again to resume.", file=sys.stderr)
         return 130
     except Exception as err:
         status, line = explain(err)
@@ -71,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
             raise  # a bug, not the input or the machine: the traceback is what helps
         if debug:
             traceback.print_exc()
-        print(f"depthq {args.verb}: {line}", file=sys.stderr)
+        print(f"depthq {verb}: {line}", file=sys.stderr)
         return status
 
 

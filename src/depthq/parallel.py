@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import pickle
 import queue
 import shutil
+import signal
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -32,9 +34,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, WorkerError
 
 EXECUTORS = ("local", "ray")
+_RESUME = "run the same command to resume"
 
 
 class Worker(Protocol):
@@ -127,18 +130,32 @@ def _timed(run: Callable[[], object], *_inputs: Any) -> float:
 
 
 def _serve(make_worker: Callable[[], Worker], tasks, results) -> None:
-    """A local worker process: build the state once, then serve tasks until the None sentinel."""
-    worker = make_worker()
+    """A local worker process: build the state once, then serve tasks until the None sentinel. A
+    failure is sent back as (position or None while starting, False, (exception, traceback))."""
+    position = None
+    try:
+        worker = make_worker()
+    except Exception as err:
+        results.put((position, False, (_portable(err), traceback.format_exc())))
+        return
     try:
         while (item := tasks.get()) is not None:
             position, task = item
-            try:
-                results.put((position, True, worker(task)))
-            except Exception:
-                results.put((position, False, traceback.format_exc()))
-                return
+            results.put((position, True, worker(task)))
+    except Exception as err:
+        results.put((position, False, (_portable(err), traceback.format_exc())))
     finally:
         worker.close()
+
+
+def _portable(err: BaseException) -> BaseException | None:
+    """`err` if it survives pickling (to reach the main process intact: type, errno, filename), else
+    None (the traceback text still names it)."""
+    try:
+        pickle.loads(pickle.dumps(err))
+    except Exception:
+        return None
+    return err
 
 
 def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[int, Any]]:
@@ -158,7 +175,9 @@ def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[in
         for _ in tasks:
             position, ok, value = _next(results, procs, what)
             if not ok:
-                raise RuntimeError(f"a {what} worker failed on task {position}:\n{value}")
+                error, text = value
+                where = "while starting" if position is None else f"on task {position}"
+                raise WorkerError(f"a {what} worker failed {where}:\n{text}", error) from error
             yield position, value
     finally:
         for p in procs:
@@ -168,13 +187,25 @@ def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[in
 
 
 def _next(results, procs, what: str) -> Any:
-    """The next item a worker put on `results`; an error instead of a hang when every worker died."""
+    """The next item a worker put on `results`; an error instead of a hang when a worker died."""
     while True:
         try:
             return results.get(timeout=5)
         except queue.Empty:
+            for p in procs:
+                if p.exitcode is not None and p.exitcode != 0:
+                    raise WorkerError(_death(what, p.exitcode)) from None
             if not any(p.is_alive() for p in procs):
-                raise RuntimeError(f"all {what} workers died; run the same command to resume") from None
+                raise WorkerError(f"all {what} workers died; {_RESUME}") from None
+
+
+def _death(what: str, exitcode: int) -> str:
+    """One line for a worker process that ended without a result, by its exit code."""
+    if exitcode < 0:
+        name = signal.Signals(-exitcode).name
+        oom = " (the system's out-of-memory killer sends it)" if -exitcode == signal.SIGKILL else ""
+        return f"a {what} worker process was killed by {name}{oom}; {_RESUME}"
+    return f"a {what} worker process exited with status {exitcode}; {_RESUME}"
 
 
 class _RayWorker:
@@ -211,10 +242,23 @@ def _run_ray(
     try:
         yield from ActorPool(actors).map_unordered(lambda a, item: a.run.remote(item), list(enumerate(tasks)))
     except ray.exceptions.RayError as err:
-        raise RuntimeError(f"a {what} task failed on Ray: {err}") from err
+        raise WorkerError(f"a {what} task failed on Ray: {err}", _ray_cause(err)) from err
     finally:
         for a in actors:
             ray.kill(a)
+
+
+def _ray_cause(err: BaseException) -> BaseException | None:
+    """The task's own exception inside Ray's wrappers (a failed task, or an actor whose constructor
+    failed), or None when Ray itself failed (a node lost for good)."""
+    import ray
+
+    while isinstance(err, ray.exceptions.RayError):
+        cause = getattr(err, "cause", None)
+        if not isinstance(cause, BaseException):
+            return None
+        err = cause
+    return err
 
 
 def _run_jobs_ray(jobs: Sequence[Job], address: str | None) -> Iterator[tuple[str, float]]:
@@ -232,7 +276,7 @@ def _run_jobs_ray(jobs: Sequence[Job], address: str | None) -> Iterator[tuple[st
             try:
                 yield name, ray.get(ready[0])
             except ray.exceptions.RayError as err:
-                raise RuntimeError(f"job {name!r} failed on Ray: {err}") from err
+                raise WorkerError(f"job {name!r} failed on Ray: {err}", _ray_cause(err)) from err
 
     for job in jobs:
         if not job.remote:
