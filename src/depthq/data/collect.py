@@ -31,22 +31,22 @@ from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
-from depthq.sim.canyon import CanyonId
+from depthq.sim.canyon import PAPER, CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
-from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig
+from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig, world_for
 
 MAX_DURATION_S = 50.0  # the original's max_duration of a collection run
 SKIP_FRAMES = 9  # the original did not save the first 9 frames of a run (skip_first=8)
 
 
 def exploration_env(
-    decision_hz: float = DEFAULT_DECISION_HZ, max_duration_s: float = MAX_DURATION_S
+    decision_hz: float = DEFAULT_DECISION_HZ, max_duration_s: float = MAX_DURATION_S, family: str = PAPER
 ) -> EnvConfig:
-    """The collection env: the OU command is applied up to the robot's own limit, not clipped to ±1."""
-    return EnvConfig(
-        world=WorldConfig(decision_hz=decision_hz, max_yaw_rate=TURTLEBOT3_MAX_YAW_RATE),
-        time_limit_s=max_duration_s,
-    )
+    """The collection env: the OU command is applied up to the robot's own limit, not clipped to ±1;
+    the world of canyon `family` (its runs drive `family`'s train and val canyons, the manifest's
+    env.world records which)."""
+    world = WorldConfig(decision_hz=decision_hz, max_yaw_rate=TURTLEBOT3_MAX_YAW_RATE)
+    return EnvConfig(world=world_for(world, family), time_limit_s=max_duration_s)
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, in
     robot was commanded after its frame (unclipped: labels clip it, `DataConfig.action_clip`).
     """
     env_seed, policy_seed = run_seeds(seed, split, index)
-    canyon = CanyonId(split, index)
+    canyon = CanyonId(split, index, config.env.world.family)
     policy = OUPolicy(config.ou, seed=policy_seed)
     limit = config.env.world.max_yaw_rate
     obs, info = env.reset(seed=env_seed, options={"canyon": canyon})

@@ -18,6 +18,7 @@ manifest.json:
         file                    path relative to DIR, e.g. "runs/train_000123.h5"
         n_frames, end_reason    frame count; "bump" | "contact" (collisions) | "time_limit" | "step_limit"
                                 | "stop" (a run imported from a bag: the robot stood or the frames stopped)
+                                | "end" (the run reached its canyon's open end)
         canyon_split, canyon_index, canyon_seed, policy_seed
                                 the canyon the run drove in and the exploration policy's seed
                                 ("recorded", its position in the bag, 0, 0 for an imported run)

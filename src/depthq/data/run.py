@@ -17,8 +17,9 @@ SPLITS = ("train", "val")
 # the canyon streams of depthq.sim.canyon, and "recorded": a run imported from a robot's bag
 CANYON_SPLITS = ("train", "val", "eval", "recorded")
 COLLISION_END_REASONS = ("bump", "contact")
-# "stop": an imported run ended where the robot stood still or the recording broke off
-END_REASONS = (*COLLISION_END_REASONS, "time_limit", "step_limit", "stop")
+# "stop": an imported run ended where the robot stood still or the recording broke off; "end": the
+# run reached the open end of its canyon (a short one, `depthq.sim.canyon.FAMILIES`)
+END_REASONS = (*COLLISION_END_REASONS, "time_limit", "step_limit", "stop", "end")
 
 
 @dataclass(frozen=True)

@@ -19,11 +19,17 @@ from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
 from depthq.errors import ConfigError
-from depthq.evaluate.metrics import SUCCESS_DISTANCE, distance_from_spawn, imitation_loss, summarize
+from depthq.evaluate.metrics import (
+    distance_from_spawn,
+    distance_to_collision,
+    imitation_loss,
+    run_success,
+    summarize,
+)
 from depthq.parallel import LOCAL, Executor
-from depthq.sim.canyon import N_EVAL_CANYONS, CanyonId
+from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, CanyonId, eval_canyon_ids, split_family
 from depthq.sim.env import EnvConfig
-from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig
+from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig, world_for
 
 RUN_FIELDS = (
     "canyon",
@@ -34,6 +40,10 @@ RUN_FIELDS = (
     "steps",
     "imitation_loss",
     "decision_ms_median",
+    "progress",
+    "distance_to_collision",
+    "closest",
+    "canyon_length",
 )
 FIG4_EVERY, FIG4_FRAMES = 5, 4  # the first canyon keeps every 5th frame; Fig. 4 shows 4, evenly spread
 
@@ -43,25 +53,31 @@ class EvalConfig:
     """How a policy is evaluated; stored in every summary."""
 
     canyons: tuple[str, ...] = tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
-    time_limit_s: float = 45.0
+    time_limit_s: float | None = None  # None: the canyons' family's (45 s for the paper's)
     seed: int = 0  # sensor noise: canyon i uses seed + i
     which: str = "best"  # checkpoint weights to load
     # One decision per camera frame. None: the rate of a checkpoint's training data (else the default).
     decision_hz: float | None = None
 
     def __post_init__(self) -> None:
-        for c in self.canyons:
-            CanyonId.parse(c)
+        families = sorted({CanyonId.parse(c).family for c in self.canyons})
+        if len(families) != 1:
+            raise ConfigError(f"the canyons of one evaluation belong to one family, got {families}")
         _ = self.env  # checks the rate
-        if not self.time_limit_s > 0:
+        if self.time_limit_s is not None and not self.time_limit_s > 0:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
         if self.which not in ("best", "last"):
             raise ConfigError(f"--which must be 'best' or 'last', got {self.which!r}")
 
     @property
+    def family(self) -> str:
+        return CanyonId.parse(self.canyons[0]).family
+
+    @property
     def env(self) -> EnvConfig:
         world = WorldConfig() if self.decision_hz is None else WorldConfig(decision_hz=self.decision_hz)
-        return EnvConfig(world=world, time_limit_s=self.time_limit_s)
+        limit = FAMILIES[self.family].time_limit_s if self.time_limit_s is None else self.time_limit_s
+        return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
 
 
 def data_rate(policy_spec: str) -> float:
@@ -79,14 +95,17 @@ def data_rate(policy_spec: str) -> float:
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:
     """'eval' (all 20), 'eval:0-4' (a range), 'eval:2,7' (a list) or a range of `val` canyons
-    ('val:1000-1019'; design choices are made there, the `eval` canyons are the test set)."""
-    stream, _, which = text.partition(":")
+    ('val:1000-1019'; design choices are made there, the `eval` canyons are the test set); a family
+    other than the paper's in front: 'hard/eval', 'hard/val:1000-1019'."""
+    family, rest = split_family(text)
+    stream, _, which = rest.partition(":")
     if stream not in ("eval", "val") or (stream == "val" and not which):
         raise ConfigError(
-            f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
+            f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7' or 'val:1000-1019', "
+            "optionally after a family, e.g. 'hard/val:1000-1019'"
         )
     if not which:
-        return tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
+        return tuple(str(c) for c in eval_canyon_ids(family))
     try:
         if "-" in which:
             lo, hi = (int(v) for v in which.split("-"))
@@ -97,7 +116,7 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
         raise ConfigError(f"unknown canyon set {text!r}: expected e.g. 'eval:0-4', 'val:1000-1019'") from None
     if not indices:
         raise ConfigError(f"canyon set {text!r} is empty")
-    return tuple(str(CanyonId(stream, i)) for i in indices)
+    return tuple(str(CanyonId(stream, i, family)) for i in indices)
 
 
 def drive(
@@ -132,20 +151,30 @@ def drive(
     poses = np.asarray(poses)
     distance = distance_from_spawn(poses)
     shown = np.unique(np.linspace(0, len(snaps) - 1, FIG4_FRAMES).round().astype(int)) if snaps else []
+    goal, reason = FAMILIES[parse_canyon(canyon).family].goal, info["end_reason"]
     return {
         "canyon": canyon,
         "distance": distance,
         "path_length": info["path_length"],
-        "success": distance > SUCCESS_DISTANCE,
-        "end_reason": info["end_reason"],
+        "success": run_success(goal, distance, reason),
+        "end_reason": reason,
         "steps": step,
         "imitation_loss": imitation_loss(np.array(actions), np.array(expert_actions)),
         "decision_ms_median": float(np.median(ms)),
+        "progress": info["progress"],
+        "distance_to_collision": distance_to_collision(info["progress"], reason, info["canyon_length"]),
+        "closest": info["closest"],
+        "canyon_length": info["canyon_length"],
         "poses": poses.astype(np.float32),
         "actions": np.asarray(actions, np.float32),
         "snapshots": [snaps[i] for i in shown],
         "video": frames,
     }
+
+
+def _key(canyon: str) -> str:
+    """A canyon's name as part of an array's name in trajectories.npz: 'eval_3', 'hard_eval_3'."""
+    return canyon.replace(":", "_").replace("/", "_")
 
 
 def _copy(record: dict[str, Any]) -> dict[str, Any]:
@@ -254,8 +283,8 @@ def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video
     buf = io.BytesIO()
     np.savez_compressed(
         buf,
-        **{f"{r['canyon'].replace(':', '_')}_poses": r["poses"] for r in runs},
-        **{f"{r['canyon'].replace(':', '_')}_actions": r["actions"] for r in runs},
+        **{f"{_key(r['canyon'])}_poses": r["poses"] for r in runs},
+        **{f"{_key(r['canyon'])}_actions": r["actions"] for r in runs},
     )
     atomic_write_bytes(out / "trajectories.npz", buf.getvalue())
     plot_trajectories(runs, out / "trajectories.png", title=summary["policy"]["policy"])

@@ -8,6 +8,18 @@ from typing import Any
 import numpy as np
 
 SUCCESS_DISTANCE = 15.0  # metres
+COLLISIONS = ("bump", "contact")
+
+
+def run_success(goal: str, distance: float, end_reason: str) -> bool:
+    """A run's success by its canyon family's goal: 'distance' (the paper's: more than 15 m from the
+    spawn) or 'end' (the canyon's open end reached, which ends the run before any collision)."""
+    return distance > SUCCESS_DISTANCE if goal == "distance" else end_reason == "end"
+
+
+def distance_to_collision(progress: float, end_reason: str, canyon_length: float) -> float:
+    """Progress along the canyon up to the first bump or contact; the canyon's length without one."""
+    return progress if end_reason in COLLISIONS else canyon_length
 
 
 def distance_from_spawn(poses: np.ndarray) -> float:
@@ -31,6 +43,8 @@ def summarize(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Mean and std over runs of the online metrics, and the success count."""
     dist = np.array([r["distance"] for r in runs])
     imit = np.array([r["imitation_loss"] for r in runs])
+    to_collision = np.array([r["distance_to_collision"] for r in runs])
+    closest = np.array([r["closest"] for r in runs])
     return {
         "runs": len(runs),
         "distance_mean": float(dist.mean()),
@@ -39,4 +53,12 @@ def summarize(runs: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "imitation_loss_mean": float(imit.mean()),
         "imitation_loss_std": float(imit.std()),
         "decision_ms_median": float(np.median([r["decision_ms_median"] for r in runs])),
+        # metrics that do not saturate when every run succeeds (docs/hard_canyons.md)
+        "reached_end": int(sum(r["end_reason"] == "end" for r in runs)),
+        "collisions": int(sum(r["end_reason"] in COLLISIONS for r in runs)),
+        "progress_mean": float(np.mean([r["progress"] for r in runs])),
+        "distance_to_collision_mean": float(to_collision.mean()),
+        "distance_to_collision_std": float(to_collision.std()),
+        "closest_mean": float(closest.mean()),
+        "closest_min": float(closest.min()),
     }

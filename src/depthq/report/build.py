@@ -16,10 +16,18 @@ from depthq.report.tables import (
     csv_text,
     markdown,
     per_seed_rows,
+    reaches_end_goal,
     reference_rows,
     table1_rows,
     table2_rows,
 )
+
+SUCCESS_TEXT = {
+    False: "more than 15 m from the spawn",
+    True: "the canyon's end reached without a collision; 'to collision': progress along the canyon "
+    "until the first bump or contact (the canyon's length if none), 'closest': the smallest LiDAR-axis "
+    "distance to a wall or pillar (docs/hard_canyons.md)",
+}
 
 
 def best_depth_eval(out: Path, sweep: Sweep) -> Path | None:
@@ -42,14 +50,15 @@ def _trunks(out: Path) -> list[str]:
 def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> None:
     t1 = table1_rows(out, sweep)
     seeds = per_seed_rows(out, sweep)
-    refs = reference_rows(out)
+    ends = reaches_end_goal(sweep)
+    refs = reference_rows(out, ends)
     stats = dataset_stats(Dataset.open(out / "data"), DataConfig(subsets=sweep.subsets))
     t2 = table2_rows(stats, sweep.subsets)
     note = (
         f"mean (std) over the seeds evaluated so far (columns 'seeds'; the sweep has {len(sweep.seeds)}), "
         "and for distance and success the 95 % Student-t interval of that mean [low, high]; "
         f"{sweep.canyons} canyons, {sweep.decision_hz:g} decisions/s, {sweep.time_limit_s:.0f} s "
-        f"per run; success = more than 15 m from the spawn. Trunk: {', '.join(_trunks(out)) or '–'} "
+        f"per run; success = {SUCCESS_TEXT[ends]}. Trunk: {', '.join(_trunks(out)) or '–'} "
         f"(see the deviations) instead of the paper's MobileNet-v1-0.25.\n"
     )
     atomic_write_bytes(

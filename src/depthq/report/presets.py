@@ -1,4 +1,5 @@
-"""Reproduction presets: the same sweep at three sizes (and the paper's at the nominal rate)."""
+"""Reproduction presets: the same sweep at three sizes (the paper's also at the nominal rate), and
+the hard canyon family's Table I (`hard`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from dataclasses import replace
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
 from depthq.report.sweep import Sweep
+from depthq.sim.canyon import FAMILIES
 from depthq.sim.world import NOMINAL_DECISION_HZ
 
 PRESETS: dict[str, Sweep] = {
@@ -55,6 +57,17 @@ PRESETS: dict[str, Sweep] = {
 }
 # The paper's table at the camera's nominal 10 Hz, to compare with the calibrated rate (docs/calibration.md).
 PRESETS["nominal"] = replace(PRESETS["paper"], name="nominal", decision_hz=NOMINAL_DECISION_HZ)
+# Table I in the hard canyon family (docs/hard_canyons.md): its own data, its 20 eval canyons, runs
+# long enough to reach the canyon's end; success = the end reached without a collision.
+PRESETS["hard"] = replace(
+    PRESETS["paper"],
+    name="hard",
+    runs=500,
+    subsets=(50, 200, 500),
+    canyons="hard/eval",
+    time_limit_s=FAMILIES["hard"].time_limit_s,
+    family="hard",
+)
 
 
 def get_preset(name: str) -> Sweep:

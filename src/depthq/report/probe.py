@@ -34,12 +34,15 @@ ACTIONS = np.array([-1.0, 0.0, 1.0])
 PAPER_FRAMES_PER_RUN = sum(s for s, _ in PAPER_TABLE2.values()) / sum(PAPER_TABLE2) + 1
 
 
-def ou_statistics(decision_hz: float, runs: int, seed: int = 0, max_yaw_rate: float | None = None) -> dict:
-    """Table II statistics of `runs` OU runs in the first `runs` training canyons, at `decision_hz`."""
+def ou_statistics(
+    decision_hz: float, runs: int, seed: int = 0, max_yaw_rate: float | None = None, family: str = "paper"
+) -> dict:
+    """Table II statistics of `runs` OU runs in the first `runs` training canyons of `family`, at
+    `decision_hz`."""
     from depthq.data.collect import CollectConfig, collect_run, exploration_env
     from depthq.sim.env import CanyonEnv
 
-    env_config = exploration_env(decision_hz)
+    env_config = exploration_env(decision_hz, family=family)
     if max_yaw_rate is not None:
         env_config = replace(env_config, world=replace(env_config.world, max_yaw_rate=max_yaw_rate))
     config = CollectConfig(runs=runs, val_runs=0, env=env_config)
@@ -68,18 +71,21 @@ def ou_statistics(decision_hz: float, runs: int, seed: int = 0, max_yaw_rate: fl
     }
 
 
-def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: float = 45.0) -> dict:
-    """The one-step oracle (true next bins for −1, 0, +1; max-min rule) in `canyons`."""
+def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: float | None = None) -> dict:
+    """The one-step oracle (true next bins for −1, 0, +1; max-min rule) in `canyons` (their family's
+    time limit by default)."""
     from depthq.control.action_selection import select_depth_action
     from depthq.evaluate.evaluate import parse_canyon_set
     from depthq.evaluate.metrics import SUCCESS_DISTANCE
+    from depthq.sim.canyon import FAMILIES, split_family
     from depthq.sim.env import CanyonEnv, EnvConfig
     from depthq.sim.sensors import depth_bins, finish_scan
-    from depthq.sim.world import WorldConfig
+    from depthq.sim.world import WorldConfig, world_for
 
-    env = CanyonEnv(
-        EnvConfig(world=WorldConfig(decision_hz=decision_hz), time_limit_s=time_limit_s), camera=False
-    )
+    family = split_family(canyons)[0]
+    limit = FAMILIES[family].time_limit_s if time_limit_s is None else time_limit_s
+    world = world_for(WorldConfig(decision_hz=decision_hz), family)
+    env = CanyonEnv(EnvConfig(world=world, time_limit_s=limit), camera=False)
     world, distances = env.world, []
     exact, rng = replace(env.config.world.lidar, noise_std=0.0), np.random.default_rng(0)
     try:
@@ -140,14 +146,16 @@ def probe(
     dqn_runs: int = 200,
     canyons: str = VAL_CANYONS,
     epochs: int = DEFAULT_EPOCHS,
+    family: str = "paper",
 ) -> dict[str, Any]:
-    """Run the chosen parts at each rate; returns (and the CLI writes) everything measured."""
+    """Run the chosen parts at each rate; returns (and the CLI writes) everything measured. `family`:
+    the canyon family of the OU statistics (the oracle and the small net drive in `canyons`)."""
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
         raise ConfigError(f"unknown probe part(s) {unknown}; expected some of {PARTS}")
     result: dict[str, Any] = {"rates": list(rates)}
     if "stats" in parts:
-        result["stats"] = _parallel(ou_statistics, [(hz, stats_runs) for hz in rates])
+        result["stats"] = _parallel(ou_statistics, [(hz, stats_runs, 0, None, family) for hz in rates])
     if "oracle" in parts:
         result["oracle"] = _parallel(oracle_drive, [(hz, canyons) for hz in rates])
     if "dqn" in parts:

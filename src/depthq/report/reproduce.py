@@ -34,7 +34,7 @@ from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor, Job, cores
 from depthq.report.build import best_depth_eval, build_report
 from depthq.report.presets import get_preset
-from depthq.report.sweep import Sweep
+from depthq.report.sweep import SETUP_DEFAULTS, Sweep
 
 if TYPE_CHECKING:
     from depthq.data.collect import CollectConfig
@@ -98,7 +98,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
         runs=sweep.runs,
         val_runs=sweep.val_runs,
         max_steps=sweep.max_steps,
-        env=exploration_env(sweep.decision_hz),
+        env=exploration_env(sweep.decision_hz, family=sweep.family),
     )
     eval_config = EvalConfig(
         canyons=parse_canyon_set(sweep.canyons),
@@ -182,6 +182,7 @@ def _claim(out: Path, sweep: Sweep) -> None:
         held = read_json(marker)
         held = held.get("sweep", held.get("preset", {}))  # folders written before sweeps say "preset"
         ours = sweep.setup()
+        held = {**SETUP_DEFAULTS, **held}
         differ = [f"{k} {held.get(k)!r} there, {v!r} here" for k, v in ours.items() if held.get(k) != v]
         if differ:
             raise ConfigError(

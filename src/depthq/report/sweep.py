@@ -12,11 +12,12 @@ from __future__ import annotations
 import itertools
 import json
 import re
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from depthq.errors import ConfigError
 from depthq.report.layout import NETS, model_name
+from depthq.sim.canyon import FAMILIES, PAPER
 from depthq.sim.world import DEFAULT_DECISION_HZ
 
 if TYPE_CHECKING:
@@ -64,8 +65,16 @@ class Sweep:
     decision_hz: float = DEFAULT_DECISION_HZ  # collection and evaluation: one decision per camera frame
     nets: tuple[str, ...] = NETS
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
+    family: str = PAPER  # the canyon family the dataset is collected in (`canyons` may name another)
 
     def __post_init__(self) -> None:
+        from depthq.evaluate.evaluate import parse_canyon_set
+
+        if self.family not in FAMILIES:
+            raise ConfigError(
+                f"sweep {self.name}: unknown canyon family {self.family!r}; one of {sorted(FAMILIES)}"
+            )
+        parse_canyon_set(self.canyons)  # a clear error for a bad --canyons, before any work
         if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > self.runs:
             raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} (its runs)")
         if not self.seeds or min(self.seeds) < 0:
@@ -111,8 +120,37 @@ class Sweep:
     def setup(self) -> dict[str, Any]:
         """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent)."""
         keep = ("runs", "val_runs", "max_steps", "epochs", "train_batches", "val_batches", "canyons",
-                "time_limit_s", "decision_hz")
+                "time_limit_s", "decision_hz", "family")
         return json.loads(json.dumps({k: getattr(self, k) for k in keep}))
+
+
+# What a folder written before a setting was part of the setup holds for it.
+SETUP_DEFAULTS: dict[str, Any] = {"family": PAPER}
+
+
+def retarget(
+    sweep: Sweep, family: str | None = None, canyons: str | None = None, decision_hz: float | None = None
+) -> Sweep:
+    """`sweep` with its data collected in canyon `family`, evaluated in `canyons` (by default that
+    family's eval canyons; e.g. 'hard/val:1000-1019' to choose on val canyons) at `decision_hz`.
+    Evaluation canyons of another family than the sweep's own bring their family's time limit."""
+    from depthq.sim.canyon import split_family
+
+    changes: dict[str, Any] = {}
+    if family is not None and family != sweep.family:
+        if family not in FAMILIES:
+            raise ConfigError(f"--family {family!r}: unknown canyon family; one of {sorted(FAMILIES)}")
+        changes["family"] = family
+        changes["canyons"] = "eval" if family == PAPER else f"{family}/eval"
+    if canyons is not None:
+        changes["canyons"] = canyons
+    if "canyons" in changes:
+        target = split_family(changes["canyons"])[0]
+        if target != split_family(sweep.canyons)[0]:
+            changes["time_limit_s"] = FAMILIES[target].time_limit_s
+    if decision_hz is not None:
+        changes["decision_hz"] = decision_hz
+    return replace(sweep, **changes)
 
 
 def variant_label(variant: Variant) -> str:

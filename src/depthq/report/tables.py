@@ -11,6 +11,7 @@ import numpy as np
 
 from depthq.configio import read_json
 from depthq.report.sweep import Model, Sweep, Variant, variant_label
+from depthq.sim.canyon import FAMILIES, split_family
 
 NET_LABELS = {"coll": "CQN", "depth": "DQN"}
 # The paper's Table I (mean over its 3 seeds), for comparison only: runs → net → (distance m, successes /20).
@@ -93,6 +94,11 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
             row[f"success {label}"] = _cell([r["summary"]["successes"] for r in runs], ".1f", True)
             row[f"imitation {label}"] = _cell([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
             row[f"circling {label}"] = _cell([_circling(r["runs"]) for r in runs], ".0%")
+            if reaches_end_goal(sweep):  # the hard family: metrics that do not saturate
+                row[f"to collision {label}"] = _cell(
+                    [r["summary"]["distance_to_collision_mean"] for r in runs], ".2f"
+                )
+                row[f"closest {label}"] = _cell([r["summary"]["closest_mean"] for r in runs], ".2f")
             row[f"seeds {label}"] = str(len(runs))
             offline = "cross-entropy CQN" if net == "coll" else "abs diff DQN"
             row[offline] = _cell([r["offline"]["value"] for r in runs if "offline" in r], ".3f")
@@ -118,22 +124,32 @@ def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
     return rows
 
 
-def reference_rows(out: Path) -> list[dict[str, str]]:
-    """The heuristic expert and OU exploration: mean (std) over canyons."""
+def reference_rows(out: Path, reaches_end: bool = False) -> list[dict[str, str]]:
+    """The heuristic expert and OU exploration: mean (std) over canyons (`reaches_end`: with the hard
+    family's distance to the first collision and closest approach)."""
     rows = []
     for ref in ("heuristic", "ou"):
         path = out / "eval" / ref / "summary.json"
         if path.is_file():
             s = read_json(path)["summary"]
-            rows.append(
-                {
-                    "policy": ref,
-                    "distance": f"{s['distance_mean']:.2f} ({s['distance_std']:.2f})",
-                    "success": f"{s['successes']}/{s['runs']}",
-                    "imitation": f"{s['imitation_loss_mean']:.3f} ({s['imitation_loss_std']:.3f})",
-                }
-            )
+            row = {
+                "policy": ref,
+                "distance": f"{s['distance_mean']:.2f} ({s['distance_std']:.2f})",
+                "success": f"{s['successes']}/{s['runs']}",
+                "imitation": f"{s['imitation_loss_mean']:.3f} ({s['imitation_loss_std']:.3f})",
+            }
+            if reaches_end:
+                row["to collision"] = (
+                    f"{s['distance_to_collision_mean']:.2f} ({s['distance_to_collision_std']:.2f})"
+                )
+                row["closest mean / min"] = f"{s['closest_mean']:.2f} / {s['closest_min']:.2f}"
+            rows.append(row)
     return rows
+
+
+def reaches_end_goal(sweep: Sweep) -> bool:
+    """Whether the sweep's evaluation canyons are judged by reaching their end (the hard family)."""
+    return FAMILIES[split_family(sweep.canyons)[0]].goal == "end"
 
 
 def markdown(rows: list[dict[str, str]]) -> str:

@@ -17,6 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
     p.add_argument("--seed", type=int, default=0, help="collection seed (sensor and OU noise)")
     p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
+    p.add_argument(
+        "--family", default="paper", help="canyon family: paper, or hard (docs/hard_canyons.md)"
+    )
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
     add_executor_arguments(p)
@@ -29,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
     from depthq.data.collect import CollectConfig, collect, exploration_env
     from depthq.data.stats import dataset_stats, format_stats
 
-    env = exploration_env() if args.hz is None else exploration_env(args.hz)
+    hz = {} if args.hz is None else {"decision_hz": args.hz}
+    env = exploration_env(**hz, family=args.family)
     config = config_from_args(CollectConfig, args, env=env)
     start = time.perf_counter()
     executor = executor_from(args)

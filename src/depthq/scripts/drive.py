@@ -14,11 +14,14 @@ from depthq.nets.device import DEVICE_HELP, resolve_device
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policy", default="heuristic", help="'heuristic', 'ou' or a checkpoint folder")
-    p.add_argument("--canyon", default="eval:0", help="canyon id, e.g. eval:0 or train:12")
+    p.add_argument("--canyon", default="eval:0", help="canyon id, e.g. eval:0, train:12 or hard/eval:0")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--seed", type=int, default=0, help="sensor-noise and policy seed")
-    p.add_argument("--time-limit", type=float, default=45.0, help="seconds before the run is cut")
+    p.add_argument(
+        "--time-limit", type=float, default=None,
+        help="seconds before the run is cut [the canyon family's: 45 for the paper's]",
+    )
     p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
     p.add_argument("--frames", type=int, default=4, help="camera frames to save, evenly spaced")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON line")
@@ -28,15 +31,17 @@ def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
     from depthq.control.registry import make_policy
+    from depthq.sim.canyon import FAMILIES
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
-    from depthq.sim.world import WorldConfig
+    from depthq.sim.world import WorldConfig, world_for
 
     canyon = parse_canyon(args.canyon)
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     policy = make_policy(args.policy, seed=args.seed, device=str(resolve_device(args.device)))
     world = WorldConfig() if args.hz is None else WorldConfig(decision_hz=args.hz)
-    env = CanyonEnv(EnvConfig(world=world, time_limit_s=args.time_limit))
+    limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
+    env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))
     try:
         obs, info = env.reset(seed=args.seed, options={"canyon": canyon})
         policy.reset(args.seed)
@@ -60,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
         "path_length": round(info["path_length"], 3),
         "time": info["time"],
         "end_reason": info["end_reason"],
+        "progress": round(info["progress"], 3),
+        "closest": round(info["closest"], 3),
         "out": str(args.out),
     }
     if args.json:

@@ -22,7 +22,9 @@ _HELP = {
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="'heuristic', 'ou', a checkpoint folder or 'onnx:PATH'")
     p.add_argument(
-        "--canyons", default="eval", help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'"
+        "--canyons", default="eval",
+        help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'; another canyon family in front: "
+        "'hard/eval', 'hard/val:1000-1019'",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)

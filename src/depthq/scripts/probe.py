@@ -22,17 +22,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
     p.add_argument("--runs", type=int, default=200, help="training runs of the small Depth-Q-Net")
     p.add_argument("--epochs", type=int, default=40, help="training epochs of the small Depth-Q-Net")
-    p.add_argument("--canyons", default="val:1000-1019", help="val canyons to drive in (never eval)")
+    p.add_argument(
+        "--canyons", default="val:1000-1019",
+        help="val canyons to drive in (never eval), e.g. hard/val:1000-1019",
+    )
+    p.add_argument("--family", default="paper", help="canyon family of the OU statistics: paper or hard")
     p.add_argument("--out", type=Path, required=True, help="folder for probe.json and the small runs")
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.report.probe import format_stats, probe
+    from depthq.sim.canyon import split_family
 
-    if args.canyons.startswith("eval"):
+    if split_family(args.canyons)[1].startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")
     parts = tuple(args.parts.split(","))
-    result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs)
+    result = probe(
+        _rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs, args.family
+    )
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "probe.json").write_text(json.dumps(result, indent=1))
     if "stats" in result:

@@ -11,7 +11,16 @@ from depthq.parallel import add_executor_arguments, executor_from
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="quick", help="the sweep to start from: smoke, quick, paper, nominal")
+    p.add_argument(
+        "--preset", default="quick", help="the sweep to start from: smoke, quick, paper, nominal, hard"
+    )
+    p.add_argument("--family", help="canyon family of the dataset: paper or hard (default: the preset's)")
+    p.add_argument(
+        "--canyons",
+        help="evaluation canyons, e.g. hard/val:1000-1019 to compare settings on val canyons "
+        "(default: the family's eval canyons)",
+    )
+    p.add_argument("--hz", type=float, help="decisions (camera frames) per second (default: the preset's)")
     p.add_argument("--seeds", help="training seeds, e.g. 0-9 or 0,3,7 (default: the preset's)")
     p.add_argument("--sizes", help="training-set sizes in runs, e.g. 50,200 (default: the preset's)")
     p.add_argument("--nets", help="depth, coll or depth,coll (default: both)")
@@ -30,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from depthq.report.presets import get_preset
     from depthq.report.reproduce import run_sweep
-    from depthq.report.sweep import parse_ints, parse_setting
+    from depthq.report.sweep import parse_ints, parse_setting, retarget
 
     base = get_preset(args.preset)
     changes = {
@@ -40,7 +49,9 @@ def run(args: argparse.Namespace) -> int:
         "grid": tuple(parse_setting(text) for text in args.set) or None,
     }
     changes = {k: v for k, v in changes.items() if v is not None}
-    sweep = replace(base, name=f"{base.name} sweep" if changes else base.name, **changes)
+    target = retarget(base, args.family, args.canyons, args.hz)
+    widened = bool(changes) or target != base
+    sweep = replace(target, name=f"{base.name} sweep" if widened else base.name, **changes)
     times = run_sweep(sweep, args.out, device=args.device, executor=executor_from(args))
     models = len(sweep.models())
     print(f"{sweep.name}: {models} models, {sum(times.values()) / 60:.1f} min of stage time in all; "

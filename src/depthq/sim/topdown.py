@@ -1,4 +1,4 @@
-"""Top-down maps: canyon walls and driven trajectories, the way Fig. 3 (right) shows a run."""
+"""Top-down maps: canyon walls (and pillars) and driven trajectories, the way Fig. 3 (right) shows a run."""
 
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ def draw_run(
     """Walls in grey, the path in colour from the spawn (circle) to the end (cross)."""
     for wall in (canyon.left, canyon.right, canyon.back):
         ax.plot(wall[:, 0], wall[:, 1], color="0.35", lw=1.0)
+    for x, y, r in canyon.obstacles:
+        ax.add_patch(plt.Circle((x, y), r, color="0.35"))
     ymax = 8.0
     if poses is not None and len(poses):
         ax.plot(poses[:, 0], poses[:, 1], color="tab:red", lw=1.2)
