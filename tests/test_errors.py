@@ -64,6 +64,7 @@ def small_disk() -> Iterator[Path]:
     folder.rmdir()
 
 
+@pytest.mark.slow  # collections in subprocesses: 10-35 s on this 2-core host
 def test_disk_full_in_a_worker_is_one_line_and_resumes(small_disk: Path) -> None:
     out = small_disk / "d"
     full = depthq("collect", "--runs", "6", *TINY, "--out", str(out))
@@ -88,6 +89,7 @@ def as_nobody() -> Iterator[tuple[str, Path]]:
     shutil.rmtree(folder)
 
 
+@pytest.mark.slow  # collections in subprocesses: 10-35 s on this 2-core host
 def test_a_read_only_folder_in_a_worker_is_one_line(tmp_path: Path) -> None:
     """The dataset folder is writable (the manifest is written) but runs/, where the workers write,
     is a read-only bind mount: the workers' error is the line, naming runs/. (A worker cannot run as
@@ -109,6 +111,7 @@ def test_a_read_only_folder_in_a_worker_is_one_line(tmp_path: Path) -> None:
     assert resumed.returncode == 0, resumed.stderr
 
 
+@pytest.mark.slow  # collections in subprocesses: 10-35 s on this 2-core host
 def test_permission_denied_on_the_output_folder_is_one_line(as_nobody: tuple[str, Path]) -> None:
     user, folder = as_nobody
     denied = depthq("collect", "--runs", "3", *TINY, "--out", str(folder / "d"), user=user,
