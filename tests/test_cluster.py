@@ -23,6 +23,8 @@ from depthq.report.reproduce import reproduce
 ray = pytest.importorskip("ray")
 state = pytest.importorskip("ray.util.state")
 
+pytestmark = [pytest.mark.slow, pytest.mark.ray, pytest.mark.cluster]
+
 
 def _free_port() -> int:
     with socket.socket() as s:

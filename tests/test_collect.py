@@ -24,7 +24,8 @@ CONFIG = CollectConfig(runs=4, val_runs=1, max_steps=40)
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> Dataset:
-    """An uninterrupted single-process collection."""
+    """An uninterrupted single-process collection. Its own, not conftest's small dataset: it is the
+    collection under test, with the config and seed of `ARGS` that the CLI collections repeat."""
     return collect(tmp_path_factory.mktemp("ref") / "ds", CONFIG, seed=3, workers=1, progress=False)
 
 
@@ -71,6 +72,7 @@ def test_runs_replay_the_original_recorder_without_a_camera():
     assert full.meta.end_reason == kept.meta.end_reason
 
 
+@pytest.mark.slow
 def test_interrupted_collection_resumes_to_identical_arrays(reference, tmp_path):
     out = tmp_path / "ds"
     cmd = [sys.executable, "-m", "depthq.cli", "collect", *ARGS, "--workers", "2", "--out", str(out)]

@@ -17,7 +17,6 @@ from PIL import Image
 from depthq.cli import main
 from depthq.control.onnx_policy import OnnxPolicy
 from depthq.control.qnet_policy import QNetPolicy
-from depthq.data.collect import CollectConfig, collect
 from depthq.data.manifest import Dataset
 from depthq.deploy.onnx_export import FrameResize, export_onnx
 from depthq.deploy.robot import LINEAR_SPEED, decode_frame, twist_for_frame
@@ -28,14 +27,14 @@ from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 
 FAST = {"epochs": 1, "train_batches": 4, "val_batches": 1, "batch_size": 16}
+pytestmark = pytest.mark.slow  # every test here needs two trained networks (the module fixture)
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A tiny dataset and a Depth-Q-Net and a Coll-Q-Net trained on it for one short epoch."""
+def trained(tmp_path_factory: pytest.TempPathFactory, small_dataset: Path) -> dict[str, Path]:
+    """conftest's small dataset and a Depth-Q-Net and a Coll-Q-Net trained on it for one short epoch."""
     root = tmp_path_factory.mktemp("deploy")
-    data = root / "data"
-    collect(data, CollectConfig(runs=4, val_runs=1, max_steps=60), seed=0, workers=1, progress=False)
+    data = small_dataset
     folders = {"data": data}
     for model in ("depth", "coll"):
         config = TrainConfig(model=model, data=str(data), **FAST)

@@ -88,6 +88,7 @@ def without_timing(runs: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
 
 
+@pytest.mark.slow
 def test_results_do_not_depend_on_the_number_of_workers(heuristic_eval, tmp_path):
     config = EvalConfig(canyons=("eval:0", "eval:1"), time_limit_s=6.0)
     two = evaluate("heuristic", tmp_path, config, workers=2, progress=False)

@@ -84,6 +84,7 @@ def test_frozen_trunk_stays_frozen(effnet_trunk):
     assert not any(m.training for m in effnet_trunk.modules())
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the heap setting is glibc's")
 def test_trunk_reuses_its_memory_instead_of_faulting_fresh_pages(effnet_trunk):
     """Without depthq.nets.heap this call re-faults ~65,000 pages (and runs at half the speed)."""

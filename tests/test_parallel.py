@@ -27,6 +27,8 @@ def _without_timing(runs: list[dict]) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
 
 
+@pytest.mark.slow
+@pytest.mark.ray
 def test_ray_gives_the_local_results(tmp_path: Path, on_ray: Executor) -> None:
     config = EvalConfig(canyons=("val:1000", "val:1001", "val:1002"), time_limit_s=5.0)
     local = evaluate("ou", tmp_path / "local", config, workers=2, progress=False, video=False)
@@ -67,6 +69,8 @@ def test_bad_executor_settings_are_named(tmp_path: Path, capsys: pytest.CaptureF
     assert "dask" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
+@pytest.mark.ray
 def test_the_output_folder_is_checked_from_every_node(tmp_path: Path, on_ray: Executor) -> None:
     """On a Ray started here the folder passes (created, and no probe file left behind); a node that
     does not see the driver's token, or cannot write next to it, says so."""

@@ -13,6 +13,7 @@ from depthq.report.reproduce import build_stages, reproduce
 from depthq.report.tables import interval
 
 
+@pytest.mark.slow
 def test_tables_hold_numbers_for_both_networks(smoke):
     with (smoke / "table1.csv").open() as f:
         rows = list(csv.DictReader(f))
@@ -38,6 +39,7 @@ def test_tables_hold_numbers_for_both_networks(smoke):
     assert "| val |" in table2 and "paper: samples" in table2  # the paper's sizes are not in the smoke set
 
 
+@pytest.mark.slow
 def test_report_is_self_contained_and_references_only_existing_files(smoke):
     html = (smoke / "report.html").read_text()
     for ref in re.findall(r'(?:src|href)="([^"]+)"', html):
@@ -49,6 +51,7 @@ def test_report_is_self_contained_and_references_only_existing_files(smoke):
         assert (smoke / name).stat().st_size > 5000
 
 
+@pytest.mark.slow
 def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
     stamps = {p: p.stat().st_mtime_ns for p in (smoke / "eval").glob("*/summary.json")}
     stamps |= {p: p.stat().st_mtime_ns for p in (smoke / "models").glob("*/last.safetensors")}
@@ -62,6 +65,7 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
     assert set(read_json(smoke / "stages.json")) == set(times)
 
 
+@pytest.mark.slow
 def test_a_sweep_widens_a_folder_and_reuses_its_models(smoke, tmp_path, capsys):
     """More seeds and a setting's values on top of the smoke preset's folder: the preset's own
     models are kept (dropout=0.0 is its setting), the new ones trained, the tables show the
@@ -107,6 +111,7 @@ def test_intervals_are_student_t_over_seeds():
     assert interval([5.0]) is None
 
 
+@pytest.mark.slow
 def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
     assert main(["reproduce", "--preset", "huge", "--out", str(tmp_path / "x")]) == 2
     assert "huge" in capsys.readouterr().err
@@ -130,6 +135,7 @@ def test_paper_stages_finish_seed_0_for_every_size_first(tmp_path):
     assert names.index("evaluate coll_n900_s0") < names.index("train depth_n50_s1")
 
 
+@pytest.mark.slow
 def test_probe_runs_every_part_end_to_end(tmp_path, capsys):
     """`depthq probe`: Table II statistics, the oracle and a (one-epoch) Depth-Q-Net in a val canyon."""
     out = tmp_path / "probe"

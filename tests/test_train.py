@@ -29,13 +29,12 @@ from depthq.train.trainer import DivergedError, train
 FAST = {"train_batches": 8, "val_batches": 2, "batch_size": 32}
 
 
-@pytest.fixture(scope="module")
-def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """6 training runs (3 end in a bump) + 2 validation runs of ≤ 60 steps, features cached."""
-    root = tmp_path_factory.mktemp("train") / "data"
-    collect(root, CollectConfig(runs=6, val_runs=2, max_steps=60), seed=0, workers=1, progress=False)
-    load_features(Dataset.open(root), DEFAULT_TRUNK, 128, progress=False)
-    return root
+@pytest.fixture
+def data(small_dataset: Path) -> Path:
+    """conftest's small dataset: 6 training runs (3 end in a bump) + 2 validation runs of ≤ 60 steps
+    (the loss and over-fitting remarks below are about it), the default features cached (once)."""
+    load_features(Dataset.open(small_dataset), DEFAULT_TRUNK, 128, progress=False)
+    return small_dataset
 
 
 def _config(data: Path, **kwargs: object) -> TrainConfig:
@@ -47,6 +46,7 @@ def _metrics(out: Path) -> list[dict[str, str]]:
     return [dict(zip(lines[0].split(","), line.split(","), strict=True)) for line in lines[1:]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["depth", "coll"])
 def test_training_lowers_the_loss(data: Path, tmp_path: Path, model: str) -> None:
     # On this 6-run dataset Coll-Q-Net over-fits from epoch 1 at its default rate (0.1), and on the
@@ -65,6 +65,7 @@ def test_training_lowers_the_loss(data: Path, tmp_path: Path, model: str) -> Non
     assert any((out / "tb").iterdir())
 
 
+@pytest.mark.slow
 def test_resume_is_bit_identical_and_a_finished_run_is_a_no_op(data: Path, tmp_path: Path) -> None:
     whole = train(_config(data), tmp_path / "whole", progress=False)
     split = train(_config(data, epochs=2), tmp_path / "split", progress=False)
@@ -81,6 +82,7 @@ def test_resume_is_bit_identical_and_a_finished_run_is_a_no_op(data: Path, tmp_p
     assert (whole / "last.safetensors").stat().st_mtime_ns == stamp
 
 
+@pytest.mark.slow
 def test_another_config_in_the_same_folder_is_refused(data: Path, tmp_path: Path) -> None:
     out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
     with pytest.raises(ConfigError, match="batch_size"):
@@ -93,6 +95,7 @@ def test_another_config_in_the_same_folder_is_refused(data: Path, tmp_path: Path
         train(_config(data, epochs=1), out, progress=False)
 
 
+@pytest.mark.slow
 def test_checkpoint_loads_back(data: Path, tmp_path: Path) -> None:
     out = train(_config(data, epochs=2), tmp_path / "run", progress=False)
     net, record = load_qnet(out, "last", model="depth", trunk=DEFAULT_TRUNK)
@@ -112,6 +115,7 @@ def test_checkpoint_loads_back(data: Path, tmp_path: Path) -> None:
     torch.testing.assert_close(net.q_values(cached, actions), q, atol=2e-2, rtol=1e-2)  # float16 cache
 
 
+@pytest.mark.slow
 def test_feature_cache_is_reused_and_invalidated(data: Path, tmp_path: Path) -> None:
     dataset = Dataset.open(data)
     index = cache_dir(data, DEFAULT_TRUNK, 128) / "index.json"
@@ -138,6 +142,7 @@ def test_feature_cache_is_reused_and_invalidated(data: Path, tmp_path: Path) -> 
     assert load_features(dataset, DEFAULT_TRUNK, 128, progress=False).computed
 
 
+@pytest.mark.slow
 def test_blocked_adadelta_equals_torch_adadelta() -> None:
     torch.manual_seed(0)
     a = build_qnet(TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025"))
@@ -155,6 +160,7 @@ def test_blocked_adadelta_equals_torch_adadelta() -> None:
     assert all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("trunk", ["mobilenet_v1_025", "efficientnet_lite0_columns_tuned"])
 def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path, trunk: str) -> None:
     config = _config(data, trunk=trunk, epochs=1, train_batches=2, batch_size=8, input_size=64)
@@ -168,6 +174,7 @@ def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path, trunk: s
     assert moved, "the trunk's weights did not change in training"
 
 
+@pytest.mark.slow
 def test_image_samples_are_the_preprocessed_frames(data: Path) -> None:
     """Frames are decoded once and held as uint8; a batch must equal preprocessing its frames."""
     view = DepthView(Dataset.open(data), "train")
@@ -186,6 +193,7 @@ def test_default_learning_rates() -> None:
     assert TrainConfig(model="coll", data="d", lr=0.01).learning_rate == 0.01
 
 
+@pytest.mark.slow
 def test_bad_inputs(data: Path, tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="'wall'"):
         TrainConfig(model="wall", data=str(data))
@@ -216,6 +224,7 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
         load_qnet(out)
 
 
+@pytest.mark.slow
 def test_corrupted_weights_are_refused_by_name(data: Path, tmp_path: Path) -> None:
     out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
     policy_before = QNetPolicy.from_checkpoint(out)
@@ -249,6 +258,7 @@ def test_corrupted_weights_are_refused_by_name(data: Path, tmp_path: Path) -> No
     assert policy_before.kind == "depth"
 
 
+@pytest.mark.slow
 def test_divergence_stops_with_a_clear_error(data: Path, tmp_path: Path) -> None:
     with pytest.raises(DivergedError, match=r"diverged.*no epoch finished"):
         train(_config(data, lr=1e30), tmp_path / "nan", progress=False)
