@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from depthq import __version__
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, DataError
 
 T = TypeVar("T")
 
@@ -109,8 +109,6 @@ def read_json(path: Path) -> Any:
     except FileNotFoundError:
         raise
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        from depthq.errors import DataError
-
         raise DataError(f"{path}: not valid JSON ({err})") from err
 
 

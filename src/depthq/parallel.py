@@ -22,9 +22,11 @@ count), so the results are the same whatever the executor and the number of work
 from __future__ import annotations
 
 import importlib.util
+import multiprocessing as mp
 import os
 import pickle
 import queue
+import secrets
 import shutil
 import signal
 import time
@@ -159,8 +161,6 @@ def _portable(err: BaseException) -> BaseException | None:
 
 
 def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[int, Any]]:
-    import multiprocessing as mp
-
     ctx = mp.get_context("spawn")
     task_queue, results = ctx.Queue(), ctx.Queue()
     for item in enumerate(tasks):
@@ -221,7 +221,7 @@ class _RayWorker:
 
 def _ray(address: str | None):
     """The `ray` module, connected to the cluster at `address` (or one started here)."""
-    import ray
+    import ray  # the optional [ray] extra: only `--executor ray` needs it
 
     if not ray.is_initialized():
         # Workers render offscreen like this process; MUJOCO_GL must be set before mujoco is imported.
@@ -234,7 +234,7 @@ def _ray(address: str | None):
 def _run_ray(
     make_worker, tasks, workers: int, what: str, address: str | None, gpus: float
 ) -> Iterator[tuple[int, Any]]:
-    from ray.util import ActorPool
+    from ray.util import ActorPool  # the optional [ray] extra
 
     ray = _ray(address)
     actor = ray.remote(num_cpus=1, num_gpus=gpus, max_restarts=-1, max_task_retries=-1)(_RayWorker)
@@ -251,7 +251,7 @@ def _run_ray(
 def _ray_cause(err: BaseException) -> BaseException | None:
     """The task's own exception inside Ray's wrappers (a failed task, or an actor whose constructor
     failed), or None when Ray itself failed (a node lost for good)."""
-    import ray
+    import ray  # the optional [ray] extra
 
     while isinstance(err, ray.exceptions.RayError):
         cause = getattr(err, "cause", None)
@@ -305,9 +305,7 @@ def _probe_shared(token: str, node: str) -> str:
 def _check_shared_ray(folder: Path, address: str | None) -> None:
     """From each alive node: `folder` holds the driver's token file, and a file that node writes
     there is seen here."""
-    import secrets
-
-    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy  # the optional [ray] extra
 
     ray = _ray(address)
     token = folder / f".shared-check-{secrets.token_hex(4)}"
