@@ -22,7 +22,7 @@ class OnnxPolicy:
 
     def __init__(self, path: Path, threads: int | None = None) -> None:
         try:
-            import onnxruntime as ort
+            import onnxruntime as ort  # the optional [deploy] extra: a missing one is a ConfigError
         except ImportError as err:
             raise ConfigError('ONNX policies need onnxruntime: pip install "depthq[deploy]"') from err
         path = Path(path)

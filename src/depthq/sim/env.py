@@ -180,7 +180,7 @@ class CanyonEnv(gym.Env):
 
     def top_down(self, path: str | None = None):
         """A top-down map of the canyon with the trajectory so far (matplotlib figure, saved if `path`)."""
-        from depthq.sim.topdown import plot_runs
+        from depthq.sim.topdown import plot_runs  # matplotlib: envs that never draw a map skip it
 
         return plot_runs([(self.world.canyon, np.array(self.trajectory))], path=path)
 
