@@ -23,10 +23,19 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from depthq.control.action_selection import select_depth_action
+from depthq.data.collect import CollectConfig, collect, collect_run, exploration_env
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.data.stats import PAPER_TABLE2
 from depthq.errors import ConfigError
-from depthq.train.config import DEFAULT_EPOCHS
+from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.metrics import SUCCESS_DISTANCE
+from depthq.sim.canyon import FAMILIES, split_family
+from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.sim.sensors import depth_bins, finish_scan
+from depthq.sim.world import WorldConfig, world_for
+from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
+from depthq.train.trainer import train
 
 PARTS = ("stats", "oracle", "dqn")
 VAL_CANYONS = "val:1000-1019"  # far from the validation runs' canyons (val:0..89)
@@ -39,9 +48,6 @@ def ou_statistics(
 ) -> dict:
     """Table II statistics of `runs` OU runs in the first `runs` training canyons of `family`, at
     `decision_hz`."""
-    from depthq.data.collect import CollectConfig, collect_run, exploration_env
-    from depthq.sim.env import CanyonEnv
-
     env_config = exploration_env(decision_hz, family=family)
     if max_yaw_rate is not None:
         env_config = replace(env_config, world=replace(env_config.world, max_yaw_rate=max_yaw_rate))
@@ -74,14 +80,6 @@ def ou_statistics(
 def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: float | None = None) -> dict:
     """The one-step oracle (true next bins for −1, 0, +1; max-min rule) in `canyons` (their family's
     time limit by default)."""
-    from depthq.control.action_selection import select_depth_action
-    from depthq.evaluate.evaluate import parse_canyon_set
-    from depthq.evaluate.metrics import SUCCESS_DISTANCE
-    from depthq.sim.canyon import FAMILIES, split_family
-    from depthq.sim.env import CanyonEnv, EnvConfig
-    from depthq.sim.sensors import depth_bins, finish_scan
-    from depthq.sim.world import WorldConfig, world_for
-
     family = split_family(canyons)[0]
     limit = FAMILIES[family].time_limit_s if time_limit_s is None else time_limit_s
     world = world_for(WorldConfig(decision_hz=decision_hz), family)
@@ -119,11 +117,6 @@ def small_dqn(
     decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYONS, epochs: int = DEFAULT_EPOCHS
 ) -> dict:
     """Collect `runs` OU runs at `decision_hz`, train a Depth-Q-Net on them, drive it in `canyons`."""
-    from depthq.data.collect import CollectConfig, collect, exploration_env
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
-    from depthq.train.config import TrainConfig
-    from depthq.train.trainer import train
-
     data = out / "data"
     config = CollectConfig(runs=runs, val_runs=max(2, runs // 10), env=exploration_env(decision_hz))
     collect(data, config, seed=0, workers=2)
