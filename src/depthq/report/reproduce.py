@@ -25,21 +25,24 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict, write_json
+from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
+from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.device import resolve_device
+from depthq.nets.trunk import TRUNKS
 from depthq.parallel import LOCAL, Executor, Job, cores
 from depthq.report.build import best_depth_eval, build_report
 from depthq.report.presets import get_preset
 from depthq.report.sweep import SETUP_DEFAULTS, Sweep
-
-if TYPE_CHECKING:
-    from depthq.data.collect import CollectConfig
-    from depthq.evaluate.evaluate import EvalConfig
-    from depthq.train.config import TrainConfig
+from depthq.train.checkpoint import saved_epoch
+from depthq.train.config import TrainConfig
+from depthq.train.features import features_ready, load_features
+from depthq.train.trainer import train
 
 
 @dataclass(frozen=True)
@@ -59,16 +62,10 @@ def _eval_done(folder: Path) -> bool:
 
 
 def _trained(config: TrainConfig, folder: Path) -> bool:
-    from depthq.train.checkpoint import saved_epoch
-
     return saved_epoch(folder) >= config.epochs
 
 
 def _features_ready(data: Path, collect_config: CollectConfig, frozen: list[tuple[str, int]]) -> bool:
-    from depthq.data.collect import collection_complete
-    from depthq.data.manifest import Dataset
-    from depthq.train.features import features_ready
-
     if not collection_complete(data, collect_config):
         return False  # decided before any stage runs: the collection may be still to come
     return all(features_ready(Dataset.open(data), trunk, size) for trunk, size in frozen)
@@ -77,9 +74,6 @@ def _features_ready(data: Path, collect_config: CollectConfig, frozen: list[tupl
 def _features(data: Path, frozen: list[tuple[str, int]], device: str) -> None:
     """The cached features of every frozen trunk the sweep trains on, computed before any training
     reads them (trainings run in parallel on Ray)."""
-    from depthq.data.manifest import Dataset
-    from depthq.train.features import load_features
-
     for trunk, size in frozen:
         load_features(Dataset.open(data), trunk, size, device=device)
 
@@ -88,11 +82,6 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     """The pipeline as an ordered list of resumable stages. Networks run on `device`. Collection and
     the reference policies' evaluations run on `executor` from here; on Ray, every training and
     every model's evaluation is a task of its own (`depthq.parallel.Job`)."""
-    from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
-    from depthq.nets.trunk import TRUNKS
-    from depthq.train.trainer import train
-
     data = out / "data"
     collect_config = CollectConfig(
         runs=sweep.runs,
@@ -163,8 +152,6 @@ def _video_done(out: Path, sweep: Sweep, evaluations: list[Callable[[], bool]]) 
 
 
 def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str) -> None:
-    from depthq.evaluate.evaluate import evaluate
-
     best = best_depth_eval(out, sweep)
     if best is None or (best / "video.mp4").is_file():
         return
@@ -199,8 +186,6 @@ def run_sweep(
 ) -> dict[str, float]:
     """Run (or resume) every stage of `sweep` into `out`, networks on `device`, the jobs on
     `executor`, then write the tables, figures and report; returns the measured seconds per stage."""
-    from depthq.nets.device import resolve_device
-
     where = str(resolve_device(device))  # a device torch cannot use fails here, before any work
     out = Path(out).resolve()  # the same path on every node of a cluster
     executor.check_shared(out)
