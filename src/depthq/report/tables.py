@@ -8,8 +8,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import t as student_t
 
 from depthq.configio import read_json
+from depthq.data.stats import PAPER_TABLE2
 from depthq.report.sweep import Model, Sweep, Variant, variant_label
 from depthq.sim.canyon import FAMILIES, split_family
 
@@ -29,9 +31,8 @@ def interval(values: list[float]) -> tuple[float, float] | None:
     """The 95 % Student-t interval of the mean over seeds (None for one seed)."""
     if len(values) < 2:
         return None
-    from scipy import stats
 
-    half = stats.t.ppf(0.975, len(values) - 1) * np.std(values, ddof=1) / np.sqrt(len(values))
+    half = student_t.ppf(0.975, len(values) - 1) * np.std(values, ddof=1) / np.sqrt(len(values))
     return float(np.mean(values) - half), float(np.mean(values) + half)
 
 
@@ -172,8 +173,6 @@ def csv_text(rows: list[dict[str, str]]) -> str:
 
 def table2_rows(stats: dict[str, Any], subsets: tuple[int, ...]) -> list[dict[str, str]]:
     """Table II: runs, samples and samples without collision frames per subset, next to the paper's."""
-    from depthq.data.stats import PAPER_TABLE2
-
     wanted = {str(n) for n in subsets} | {"val"}
     rows = []
     for row in stats["table"]:
