@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        from depthq.data import rosbag
+        from depthq.data import rosbag  # needs the optional [ros] extra (rosbags)
     except ModuleNotFoundError as err:
         if err.name != "rosbags":
             raise

@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from depthq.data.stats import dataset_stats, format_stats
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.parallel import add_executor_arguments, executor_from
 
@@ -29,8 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.data.collect import CollectConfig, collect, exploration_env
-    from depthq.data.stats import dataset_stats, format_stats
+    from depthq.data.collect import CollectConfig, collect, exploration_env  # MuJoCo: when this verb runs
 
     hz = {} if args.hz is None else {"decision_hz": args.hz}
     env = exploration_env(**hz, family=args.family)

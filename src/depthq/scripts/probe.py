@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from depthq.errors import ConfigError
+from depthq.sim.canyon import split_family
 
 
 def _rates(text: str) -> tuple[float, ...]:
@@ -31,8 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.report.probe import format_stats, probe
-    from depthq.sim.canyon import split_family
+    from depthq.report.probe import format_stats, probe  # MuJoCo and torch: when this verb runs
 
     if split_family(args.canyons)[1].startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")

@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.report.reproduce import reproduce
+    from depthq.report.reproduce import reproduce  # MuJoCo and torch: when this verb runs
 
     times = reproduce(args.preset, args.out, device=args.device, executor=executor_from(args))
     total = sum(times.values())

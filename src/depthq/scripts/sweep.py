@@ -37,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # MuJoCo and torch (report.sweep reads sim.world's decision rate): when this verb runs.
     from depthq.report.presets import get_preset
     from depthq.report.reproduce import run_sweep
     from depthq.report.sweep import parse_ints, parse_setting, retarget

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.configio import read_json
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 from depthq.nets.losses import DEPTH_LOSSES
@@ -30,8 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.configio import read_json
-    from depthq.train.trainer import train
+    from depthq.train.trainer import train  # the data views and the trainer: when this verb runs
 
     config = config_from_args(TrainConfig, args)  # every field from its flag (select, snapshots, ...)
     out = train(config, args.out, progress=not args.no_progress, device=args.device)
