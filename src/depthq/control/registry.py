@@ -6,8 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from depthq.control.heuristic import DepthHeuristic
+from depthq.control.onnx_policy import OnnxPolicy
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import Policy
+from depthq.control.qnet_policy import QNetPolicy
 from depthq.errors import ConfigError
 
 BUILTIN = ("heuristic", "ou")
@@ -21,13 +23,9 @@ def make_policy(spec: str, seed: int | None = None, which: str = "best", device:
     if spec == "ou":
         return OUPolicy(seed=seed)
     if spec.startswith("onnx:"):
-        from depthq.control.onnx_policy import OnnxPolicy
-
         return OnnxPolicy(Path(spec.removeprefix("onnx:")))
     path = Path(spec)
     if path.is_dir():
-        from depthq.control.qnet_policy import QNetPolicy
-
         return QNetPolicy.from_checkpoint(path, which=which, device=device)
     raise ConfigError(
         f"unknown policy {spec!r}: expected one of {BUILTIN}, an existing checkpoint folder or onnx:PATH"
