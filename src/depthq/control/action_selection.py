@@ -10,6 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
+ACTIONS = (-1.0, 0.0, 1.0)  # the candidate actions a Q-net policy scores per frame
+# Each kind's rule by name, as a checkpoint records it, and in words, as an exported graph carries it.
+RULE_OF = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_probability"}
+RULES = {
+    "farthest_nearest_bin": "for each action the nearest predicted bin (bins of exactly 0 ignored); the "
+    "action whose nearest bin is farthest; ties go straight if straight is tied, else to the first",
+    "lowest_collision_probability": "the action with the lowest collision probability; ties go straight "
+    "if straight is tied, else to the first",
+}
+
 
 def depth_scores(pred_bins: np.ndarray) -> np.ndarray:
     """(K, n_bins) predicted depths → (K,) nearest predicted obstacle per action (0 if all bins are 0)."""

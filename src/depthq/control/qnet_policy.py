@@ -10,14 +10,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.control.action_selection import select_action
+from depthq.control.action_selection import ACTIONS, select_action
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import load_qnet
+from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_stem
 from depthq.nets.heads import QNet, probability
 from depthq.nets.trunk import preprocess
-
-DEFAULT_ACTIONS = (-1.0, 0.0, 1.0)
 
 
 class QNetPolicy:
@@ -28,11 +26,12 @@ class QNetPolicy:
         self,
         net: QNet,
         kind: str,
-        actions: tuple[float, ...] = DEFAULT_ACTIONS,
+        actions: tuple[float, ...] = ACTIONS,
         input_size: int = 128,
         name: str = "qnet",
         source: str | None = None,
         device: torch.device | str = "cpu",
+        weights: str | None = None,
     ) -> None:
         if kind not in ("depth", "coll"):
             raise ConfigError(f"unknown Q-net kind {kind!r}; expected 'depth' or 'coll'")
@@ -46,26 +45,30 @@ class QNetPolicy:
         self.input_size = input_size
         self.name = name
         self.source = source
+        self.weights = weights
         self.last_values: np.ndarray | None = None
 
     @classmethod
     def from_checkpoint(
         cls,
         folder: Path,
-        which: str = "best",
-        actions: tuple[float, ...] = DEFAULT_ACTIONS,
+        which: str | None = None,
+        actions: tuple[float, ...] | None = None,
         device: torch.device | str = "cpu",
     ) -> QNetPolicy:
+        """The policy of a checkpoint folder: `which` weights (None: the checkpoint's choice) and
+        `actions` (None: the checkpoint's) as in `depthq.nets.checkpoint`."""
         net, config = load_qnet(Path(folder), which=which)
         kind = config["train"]["model"]
         return cls(
             net,
             kind,
-            actions,
+            policy_record(config).actions if actions is None else actions,
             input_size=int(config["train"]["input_size"]),
             name=f"{'DQN' if kind == 'depth' else 'CQN'}:{Path(folder).name}",
             source=str(folder),
             device=device,
+            weights=weights_stem(selected(config, which)),
         )
 
     def reset(self, seed: int | None = None) -> None:
@@ -86,6 +89,7 @@ class QNetPolicy:
             "policy": self.name,
             "kind": self.kind,
             "checkpoint": self.source,
+            "weights": self.weights,
             "actions": self.actions.tolist(),
             "input_size": self.input_size,
         }

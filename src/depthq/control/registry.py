@@ -15,9 +15,12 @@ from depthq.errors import ConfigError
 BUILTIN = ("heuristic", "ou")
 
 
-def make_policy(spec: str, seed: int | None = None, which: str = "best", device: str = "cpu") -> Policy:
+def make_policy(
+    spec: str, seed: int | None = None, which: str | None = None, device: str = "cpu"
+) -> Policy:
     """`spec` is 'heuristic', 'ou', the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
-    (`which` weights: 'best' validation or 'last'; run on torch `device`) or 'onnx:PATH'."""
+    (`which` weights, `depthq.nets.checkpoint.weights_stem`, None: the checkpoint's choice; run on
+    torch `device`) or 'onnx:PATH'."""
     if spec == "heuristic":
         return DepthHeuristic()
     if spec == "ou":

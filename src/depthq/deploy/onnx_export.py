@@ -1,7 +1,7 @@
 """`depthq export`: a trained Q-net as one ONNX graph, camera frame in, per-action values out.
 
-The graph takes a uint8 camera frame (H, W, 3) of the size it was exported for (the simulated
-camera's 308 × 410 by default) and the candidate actions (K,) float32; it returns the predicted
+The graph takes a uint8 camera frame (H, W, 3) of the size it was exported for (by default the
+checkpoint's: its training data's frames) and the candidate actions (K,) float32; it returns the predicted
 depth bins (K, n_bins) in metres (Depth-Q-Net) or the collision probabilities (K,) (Coll-Q-Net).
 Resizing and scaling to [0, 1] are inside the graph, so a robot needs nothing but onnxruntime and
 numpy. The resize is `depthq.nets.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
@@ -33,20 +33,12 @@ from torch import nn
 
 from depthq import __version__
 from depthq.configio import atomic_write_bytes
-from depthq.control.qnet_policy import DEFAULT_ACTIONS
+from depthq.control.action_selection import RULES
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import load_qnet
+from depthq.nets.checkpoint import load_qnet, policy_record
 from depthq.nets.heads import QNet
-from depthq.sim.mjcf import CameraConfig
 
 OPSET = 18
-FRAME_SIZE = (CameraConfig().height, CameraConfig().width)
-SELECTION = {
-    "depth": "for each action the nearest predicted bin (bins of exactly 0 ignored); the action whose "
-    "nearest bin is farthest; ties go straight if straight is tied, else to the first",
-    "coll": "the action with the lowest collision probability; ties go straight if straight is tied, "
-    "else to the first",
-}
 
 
 def resize_weights(in_size: int, out_size: int) -> tuple[np.ndarray, int]:
@@ -107,11 +99,13 @@ class FramePolicyGraph(nn.Module):
 def export_onnx(
     checkpoint: Path,
     out: Path,
-    which: str = "best",
-    actions: tuple[float, ...] = DEFAULT_ACTIONS,
-    frame_size: tuple[int, int] = FRAME_SIZE,
+    which: str | None = None,
+    actions: tuple[float, ...] | None = None,
+    frame_size: tuple[int, int] | None = None,
 ) -> Path:
-    """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path."""
+    """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path.
+    `which` weights (None: the checkpoint's choice), `actions` and `frame_size` (None: the
+    checkpoint's) as in `depthq.nets.checkpoint`."""
     try:
         import onnx  # the optional [deploy] extra, as onnxscript: a missing one is a ConfigError
         import onnxscript  # noqa: F401  (what torch.onnx's exporter builds graphs with)
@@ -123,6 +117,9 @@ def export_onnx(
     net, record = load_qnet(checkpoint, which=which)  # checks the weights' SHA-256
     kind = record["head"]["kind"]
     input_size = int(record["input_size"])
+    policy = policy_record(record)
+    frame_size = tuple(policy.frame_size if frame_size is None else frame_size)
+    actions = policy.actions if actions is None else actions
     if len(frame_size) != 2 or min(frame_size) < input_size:
         raise ConfigError(f"frame size must be (height, width), each ≥ {input_size}, got {frame_size}")
     if not actions or any(not -1 <= a <= 1 for a in actions):
@@ -147,7 +144,7 @@ def export_onnx(
     metadata = {
         "depthq.kind": kind,
         "depthq.actions": json.dumps([float(a) for a in actions]),
-        "depthq.selection": SELECTION[kind],
+        "depthq.selection": RULES[policy.selection],
         "depthq.input_size": str(input_size),
         "depthq.frame_size": json.dumps(list(frame_size)),
         "depthq.config": json.dumps(record, sort_keys=True),

@@ -26,6 +26,7 @@ from depthq.evaluate.metrics import (
     run_success,
     summarize,
 )
+from depthq.nets.checkpoint import weights_stem
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, CanyonId, eval_canyon_ids, split_family
 from depthq.sim.env import EnvConfig
@@ -55,8 +56,9 @@ class EvalConfig:
     canyons: tuple[str, ...] = tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
     time_limit_s: float | None = None  # None: the canyons' family's (45 s for the paper's)
     seed: int = 0  # sensor noise: canyon i uses seed + i
-    which: str = "best"  # checkpoint weights to load
-    # One decision per camera frame. None: the rate of a checkpoint's training data (else the default).
+    # A checkpoint's weights (`depthq.nets.checkpoint.weights_stem`); None: its own choice (`select`).
+    which: str | None = None
+    # One decision per camera frame. None: the rate a checkpoint records (else the default).
     decision_hz: float | None = None
 
     def __post_init__(self) -> None:
@@ -66,8 +68,8 @@ class EvalConfig:
         _ = self.env  # checks the rate
         if self.time_limit_s is not None and not self.time_limit_s > 0:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
-        if self.which not in ("best", "last"):
-            raise ConfigError(f"--which must be 'best' or 'last', got {self.which!r}")
+        if self.which is not None:
+            weights_stem(self.which)
 
     @property
     def family(self) -> str:
@@ -81,16 +83,12 @@ class EvalConfig:
 
 
 def data_rate(policy_spec: str) -> float:
-    """The decision rate of a checkpoint's simulated training data; the default rate for any other policy
-    and for data imported from a robot."""
-    from depthq.data.manifest import Dataset
-    from depthq.nets.checkpoint import read_config
+    """The decision rate a checkpoint records (its training data's); the default for any other policy."""
+    from depthq.nets.checkpoint import policy_record, read_config
 
     if not Path(policy_spec).is_dir():
         return DEFAULT_DECISION_HZ
-    data = Path(read_config(Path(policy_spec))["train"]["data"])
-    world = Dataset.open(data).config.get("env", {}).get("world", {})  # none in a robot's recording
-    return float(world.get("decision_hz", DEFAULT_DECISION_HZ))
+    return policy_record(read_config(Path(policy_spec))).decision_hz
 
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:
@@ -218,10 +216,13 @@ def evaluate(
     device: str = "auto",
     video: bool = True,
     executor: Executor = LOCAL,
+    data: Path | None = None,
 ) -> dict[str, Any]:
     """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
     files to `out`; a Q-net runs on `device` (`depthq.nets.device`). `video`: the first canyon as
-    video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`)."""
+    video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`).
+    `data`: a checkpoint's dataset for the offline metrics, when it is no longer where it was
+    (`depthq.evaluate.offline`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     from depthq.control.registry import make_policy
@@ -230,9 +231,14 @@ def evaluate(
     where = str(resolve_device(device))
     # a bad spec fails here, before any worker starts
     description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
+    dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
+        from depthq.evaluate.offline import training_data
+        from depthq.nets.checkpoint import read_config
+
         policy_spec = str(Path(policy_spec).resolve())
         executor.check_shared(Path(policy_spec))
+        dataset = training_data(read_config(Path(policy_spec)), data)
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
     runs: dict[int, dict[str, Any]] = {}
@@ -252,10 +258,10 @@ def evaluate(
             bar.set_postfix(success=sum(r["success"] for r in runs.values()))
     ordered = [runs[k] for k in sorted(runs)]
     offline = None
-    if Path(policy_spec).is_dir():
+    if dataset is not None:
         from depthq.evaluate.offline import offline_metric
 
-        offline = offline_metric(Path(policy_spec), which=config.which)
+        offline = offline_metric(Path(policy_spec), dataset, which=config.which)
     summary = {
         "policy": description,
         "config": to_dict(config),

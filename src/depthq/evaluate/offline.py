@@ -1,8 +1,14 @@
 """Table I's offline columns: a checkpoint's loss on every validation sample of its dataset —
-the training loss: absolute difference on the near bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net)."""
+the training loss: absolute difference on the near bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net).
+
+The dataset is the one the checkpoint records: where it was (an absolute path), or a folder given
+instead, which must hold the same runs (its fingerprint). A checkpoint travels without its data:
+when the dataset is not found, the metric is skipped with one line saying so.
+"""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -12,22 +18,23 @@ import torch
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
-from depthq.nets.checkpoint import load_qnet
+from depthq.errors import ConfigError, DataError
+from depthq.nets.checkpoint import dataset_record, load_qnet, selected, weights_stem
 from depthq.nets.trunk import preprocess
 from depthq.train.config import TrainConfig
-from depthq.train.features import load_features
+from depthq.train.features import dataset_fingerprint, load_features
 from depthq.train.trainer import loss_function
 
 METRICS = {"depth": "abs_diff", "coll": "cross_entropy"}
 
 
 @torch.inference_mode()
-def offline_metric(checkpoint: Path, which: str = "best") -> dict[str, Any]:
-    """The metric over the validation split of the dataset the checkpoint was trained on."""
+def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None) -> dict[str, Any]:
+    """The metric over the validation split of `dataset`, the one the checkpoint was trained on
+    (`training_data`)."""
     net, config = load_qnet(Path(checkpoint), which=which)
     train = config["train"]
     kind = train["model"]
-    dataset = Dataset.open(Path(train["data"]))
     train_config = from_dict(TrainConfig, train)
     arrays = view_arrays(dataset, "val", None, kind=kind, config=train_config.labels())
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
@@ -39,7 +46,33 @@ def offline_metric(checkpoint: Path, which: str = "best") -> dict[str, Any]:
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
     loss, _ = loss_function(train_config)(outputs, targets)
-    return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": which}
+    weights = weights_stem(selected(config, which))
+    return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": weights}
+
+
+def training_data(record: dict[str, Any], data: Path | None) -> Dataset | None:
+    """The dataset a checkpoint's config.json records: `data` (ConfigError if it holds other runs),
+    else the recorded path if it still holds the same runs, else None and one line on stderr."""
+    recorded = dataset_record(record)
+    if data is not None:
+        dataset = Dataset.open(Path(data))
+        found = dataset_fingerprint(dataset)
+        if recorded.fingerprint is not None and found != recorded.fingerprint:
+            raise ConfigError(
+                f"--data {data}: not the dataset this checkpoint was trained on (fingerprint "
+                f"{found[:12]}…, the checkpoint records {recorded.fingerprint[:12]}… of {recorded.path})"
+            )
+        return dataset
+    try:
+        dataset = Dataset.open(Path(recorded.path))
+    except (ConfigError, DataError) as err:
+        why = f"its dataset is not found ({err})"
+    else:
+        if recorded.fingerprint is None or dataset_fingerprint(dataset) == recorded.fingerprint:
+            return dataset
+        why = f"{recorded.path} no longer holds the runs it was trained on"
+    print(f"offline metrics skipped: {why}; pass --data DIR to compute them", file=sys.stderr)
+    return None
 
 
 def _frames(dataset: Dataset, arrays: dict[str, np.ndarray], batch: int = 64):

@@ -1,22 +1,42 @@
-"""Reading a trained network back, verified: a checkpoint folder's config.json and weight files.
+"""The checkpoint format, in one place: config.json (what was trained, for which policy, on which
+data), the weight files and their digests, the format's version, and reading a network back.
 
-This sits below both `depthq.train` (which writes checkpoints, see `depthq.train.checkpoint` for
-the folder's layout) and `depthq.control` (whose policies read them), so a policy needs nothing
-from training. A network is rebuilt from what config.json records of it: the trunk's name and the
-head's config.
+This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
+`depthq.train.checkpoint`) and `depthq.control` (whose policies read them), so a policy needs
+nothing from training, nor the dataset: a checkpoint folder describes itself.
 
-Every weight file carries the SHA-256 of its tensor bytes in its own safetensors metadata
-("sha256"), written in the same atomic write as the tensors. Reading checks it, so a file whose
-bytes changed after it was written (a flipped bit, a bad copy) fails with a message naming it
-instead of driving with wrong weights; a truncated or malformed file fails as well. Files written
-before the digest was recorded still load, with a warning that they cannot be verified.
+config.json (format version 3):
+
+    format, format_version   "depthq-checkpoint", 3
+    provenance               the package and version that wrote it
+    train                    the full TrainConfig (`select`: the weights a policy uses by default;
+                             `snapshots`: epochs whose weights are kept as well)
+    head, trunk, trunk_frozen, input_size, learning_rate
+                             the network, rebuilt from these
+    dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
+                             manifest records it (null for a robot's recording)
+    policy                   `PolicyRecord`: decision rate, camera frame size, candidate actions,
+                             selection rule and depth bins
+
+Weight files: best.safetensors (lowest validation loss), last.safetensors (the last epoch; after a
+finished training, the final weights), epoch_0040.safetensors (a snapshot). Each carries the
+SHA-256 of its tensor bytes in its own safetensors metadata ("sha256"), written in the same atomic
+write as the tensors. Reading checks it, so a file whose bytes changed after it was written (a
+flipped bit, a bad copy) fails with a message naming it instead of driving with wrong weights; a
+truncated or malformed file fails as well. Files written before the digest was recorded still
+load, with a warning that they cannot be verified.
+
+Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
+layout before `dataset` and `policy`). A newer version is refused by name.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import re
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,16 +45,74 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 
-from depthq.configio import from_dict, read_json
+from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
+from depthq.control.action_selection import ACTIONS, RULE_OF
 from depthq.errors import ConfigError, DataError
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
-from depthq.nets.trunk import build_trunk
+from depthq.nets.trunk import TRUNKS, build_trunk
 
 CONFIG = "config.json"
 FORMAT = "depthq-checkpoint"
-WHICH = ("best", "last")
+# 1: the first layout; 2: every weight file records its SHA-256; 3: config.json describes its
+# policy and dataset (absolute path), and TrainConfig has `select` and `snapshots`.
+FORMAT_VERSION = 3
+SELECT = ("best", "final")  # TrainConfig.select
 DIGEST = "sha256"
+_WHICH = {"best": "best", "last": "last", "final": "last"}  # `which` → weight file
+_SNAPSHOT = re.compile(r"epoch:([0-9]+)")
 _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, then the tensor bytes
+# What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
+# its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
+_LEGACY_FRAME_SIZE = (308, 410)
+_LEGACY_DECISION_HZ = 4.0
+
+
+@dataclass(frozen=True)
+class DatasetRecord:
+    """The dataset a checkpoint was trained on: where it was, what it held, how it was made."""
+
+    path: str  # absolute
+    fingerprint: str | None  # `depthq.train.features.dataset_fingerprint`; None in a version-1 record
+    env: dict[str, Any] | None  # the manifest's "env" block, verbatim; None for a robot's recording
+
+
+@dataclass(frozen=True)
+class PolicyRecord:
+    """What driving with a checkpoint needs besides its weights, fixed by the data it learned from."""
+
+    decision_hz: float  # one decision per camera frame, at the rate of its training data
+    frame_size: tuple[int, int]  # (height, width) of its training data's camera frames
+    actions: tuple[float, ...]  # the candidate actions scored per frame
+    selection: str  # the rule that picks one (`depthq.control.action_selection.RULES`)
+    bins: dict[str, Any] | None  # its data's depth bins (`depthq.sim.sensors.BinConfig`); None: unknown
+
+
+def weights_stem(which: str) -> str:
+    """The weight file `which` names: 'best', 'last' or 'final' (the same file: the weights after
+    the last epoch), or 'epoch:N' (a snapshot, `TrainConfig.snapshots`)."""
+    if which in _WHICH:
+        return _WHICH[which]
+    match = _SNAPSHOT.fullmatch(str(which))
+    if match is None or int(match.group(1)) < 1:
+        raise ConfigError(f"checkpoint weights must be 'best', 'last', 'final' or 'epoch:N', got {which!r}")
+    return snapshot_stem(int(match.group(1)))
+
+
+def snapshot_stem(epoch: int) -> str:
+    return f"epoch_{epoch:04d}"
+
+
+def selected(record: dict[str, Any], which: str | None) -> str:
+    """`which`, or when None the checkpoint's own choice (`TrainConfig.select`)."""
+    return which if which is not None else str(record["train"]["select"])
+
+
+def policy_record(record: dict[str, Any]) -> PolicyRecord:
+    return from_dict(PolicyRecord, record["policy"])
+
+
+def dataset_record(record: dict[str, Any]) -> DatasetRecord:
+    return from_dict(DatasetRecord, record["dataset"])
 
 
 def _tensor_bytes(blob: bytes) -> bytes:
@@ -82,8 +160,34 @@ def _metadata(blob: bytes, path: Path) -> dict[str, str]:
         raise DataError(f"{path}: unreadable safetensors header ({err})") from err
 
 
+def write_config(
+    folder: Path,
+    train: dict[str, Any],
+    head: HeadConfig,
+    learning_rate: float,
+    dataset: DatasetRecord,
+    policy: PolicyRecord,
+) -> None:
+    """Write `folder`/config.json in the current format (`train`: the TrainConfig as a dict)."""
+    trunk = str(train["trunk"])
+    write_json(Path(folder) / CONFIG, {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "provenance": provenance(),
+        "train": train,
+        "head": to_dict(head),
+        "trunk": trunk,
+        "trunk_frozen": TRUNKS[trunk].frozen,
+        "input_size": train["input_size"],
+        "learning_rate": learning_rate,
+        "dataset": to_dict(dataset),
+        "policy": to_dict(policy),
+    })
+
+
 def read_config(folder: Path) -> dict[str, Any]:
-    """A checkpoint folder's config.json; a folder that holds none or another format → ConfigError."""
+    """A checkpoint folder's config.json in the current format's shape (an older one upgraded); a
+    folder that holds none, another format or a newer version → ConfigError."""
     path = Path(folder) / CONFIG
     if not path.is_file():
         raise ConfigError(f"{folder}: not a checkpoint folder (no {CONFIG})")
@@ -91,7 +195,45 @@ def read_config(folder: Path) -> dict[str, Any]:
     found = record.get("format") if isinstance(record, dict) else record
     if found != FORMAT:
         raise ConfigError(f"{path}: not a {FORMAT} config (format {found!r})")
-    return record
+    version = record.get("format_version", 1)
+    if not isinstance(version, int) or isinstance(version, bool) or not 1 <= version <= FORMAT_VERSION:
+        raise ConfigError(
+            f"{path}: checkpoint format version {version!r}, but this depthq reads versions 1 to "
+            f"{FORMAT_VERSION}; it was written by a newer depthq: upgrade depthq to read it"
+        )
+    return record if version == FORMAT_VERSION else _upgrade(record)
+
+
+def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
+    """A version 1 or 2 record in version 3's shape: the policy it was trained for, its dataset as
+    its manifest says (when that is found where the record points, relative paths from here)."""
+    from depthq.data.manifest import Dataset
+
+    train = {"select": "best", "snapshots": [], **record.get("train", {})}
+    data = Path(str(train.get("data")))
+    try:
+        env = Dataset.open(data).config.get("env")
+    except (ConfigError, DataError):
+        warnings.warn(f"{data}: dataset not found; its decision rate is taken as {_LEGACY_DECISION_HZ:g} "
+                      "Hz (a checkpoint written by an older depthq records none)", stacklevel=3)
+        env = None
+    world = (env or {}).get("world", {})
+    camera = {"height": _LEGACY_FRAME_SIZE[0], "width": _LEGACY_FRAME_SIZE[1], **world.get("camera", {})}
+    kind = (record.get("head") or {}).get("kind")
+    old = {k: v for k, v in record.items() if k != "data_fingerprint"}
+    return {
+        **old,
+        "format_version": FORMAT_VERSION,
+        "train": train,
+        "dataset": {"path": str(data), "fingerprint": record.get("data_fingerprint"), "env": env},
+        "policy": {
+            "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
+            "frame_size": [camera["height"], camera["width"]],
+            "actions": list(ACTIONS),
+            "selection": RULE_OF.get(kind, ""),
+            "bins": (env or {}).get("bins"),
+        },
+    }
 
 
 def stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:
@@ -110,17 +252,17 @@ def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Pa
 
 
 def load_qnet(
-    folder: Path, which: str = "best", model: str | None = None, trunk: str | None = None
+    folder: Path, which: str | None = None, model: str | None = None, trunk: str | None = None
 ) -> tuple[QNet, dict[str, Any]]:
-    """The trained network in `folder` in eval mode, and its config.json.
+    """The trained network in `folder` in eval mode, and its config.json (`read_config`).
 
-    `which` is "best" (lowest validation loss) or "last". `model` / `trunk`, when given, must be what
-    the folder holds. A missing, incomplete or corrupted folder, or one that does not match → an error
-    naming the file.
+    `which` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.select`).
+    `model` / `trunk`, when given, must be what the folder holds. A missing, incomplete or corrupted
+    folder, or one that does not match → an error naming the file.
     """
     folder = Path(folder)
-    if which not in WHICH:
-        raise ConfigError(f"checkpoint weights must be one of {WHICH}, got {which!r}")
+    if which is not None:
+        weights_stem(which)  # a bad value fails before the folder is looked at
     if not folder.is_dir():
         raise ConfigError(f"{folder}: no such checkpoint folder")
     record = read_config(folder)
@@ -131,9 +273,13 @@ def load_qnet(
     for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
         if asked is not None and asked != held:
             raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
-    path = folder / f"{which}.safetensors"
+    chosen = selected(record, which)
+    path = folder / f"{weights_stem(chosen)}.safetensors"
     if not path.is_file():
-        raise ConfigError(f"{folder}: incomplete checkpoint, no {path.name} (no epoch finished yet?)")
+        snapshots = record["train"]["snapshots"]
+        why = (f"its snapshots are at epochs {snapshots}" if chosen.startswith("epoch:")
+               else "no epoch finished yet?")
+        raise ConfigError(f"{folder}: no {path.name} for weights {chosen!r} ({why})")
     tensors, _ = read_weights(path)
     net = QNet(build_trunk(str(record.get("trunk"))), build_head(from_dict(HeadConfig, head)))
     load_trainable_state(net, tensors, path)

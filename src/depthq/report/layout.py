@@ -16,5 +16,11 @@ NETS = ("depth", "coll")
 
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:
-    """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant."""
-    return f"{net}_n{runs}_s{seed}" + "".join(f"_{k}{v}" for k, v in variant)
+    """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant (a tuple value's items
+    joined by '+': depth_n200_s1_snapshots40+80)."""
+    return f"{net}_n{runs}_s{seed}" + "".join(f"_{k}{setting_text(v)}" for k, v in variant)
+
+
+def setting_text(value: Any) -> str:
+    """A setting's value as a folder name shows it (and `--set` takes it): a tuple joined by '+'."""
+    return "+".join(map(str, value)) if isinstance(value, tuple) else str(value)

@@ -16,7 +16,7 @@ from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from depthq.errors import ConfigError
-from depthq.report.layout import NETS, model_name
+from depthq.report.layout import NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER
 from depthq.sim.world import DEFAULT_DECISION_HZ
 
@@ -154,7 +154,7 @@ def retarget(
 
 
 def variant_label(variant: Variant) -> str:
-    return ", ".join(f"{k}={v}" for k, v in variant) or "preset"
+    return ", ".join(f"{k}={setting_text(v)}" for k, v in variant) or "preset"
 
 
 def parse_ints(text: str, what: str) -> tuple[int, ...]:
@@ -172,7 +172,8 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
 
 
 def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
-    """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field and the values to try."""
+    """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field and the values to try. A
+    tuple field takes each value as items joined by '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
     from depthq.train.config import TrainConfig
 
     key, sep, raw = text.partition("=")
@@ -185,15 +186,24 @@ def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
         raise ConfigError(f"--set {key!r} is not a training setting one can sweep; one of {allowed}")
     values = []
     for item in raw.split(","):
-        try:
-            value = json.loads(item)
-        except json.JSONDecodeError:
-            value = item  # a word, e.g. a trunk's name
-        if isinstance(defaults[key], float) and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if not _SAFE.match(str(value)):
+        if isinstance(defaults[key], tuple):
+            value = tuple(_value(part, None) for part in item.split("+"))
+        else:
+            value = _value(item, defaults[key])
+        if not _SAFE.match(setting_text(value)):
             raise ConfigError(f"--set {key}: value {item!r} cannot name a model folder")
         values.append(value)
     if len(set(map(str, values))) != len(values):
         raise ConfigError(f"--set {key}: {raw!r} repeats a value")
     return key, tuple(values)
+
+
+def _value(text: str, default: Any) -> Any:
+    """One value of `--set`: a JSON number or word; an int for a float setting becomes a float."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        value = text  # a word, e.g. a trunk's name
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    return value

@@ -22,7 +22,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--time-limit", type=float, default=None,
         help="seconds before the run is cut [the canyon family's: 45 for the paper's]",
     )
-    p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
+    p.add_argument("--hz", type=float, default=None,
+                   help="decisions (camera frames) per second [a checkpoint's: the one it records]")
+    p.add_argument("--which", default=None, help="checkpoint weights: best, last or epoch:N [its select]")
     p.add_argument("--frames", type=int, default=4, help="camera frames to save, evenly spaced")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON line")
 
@@ -31,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
     from depthq.control.registry import make_policy
+    from depthq.evaluate.evaluate import data_rate
     from depthq.sim.canyon import FAMILIES
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
     from depthq.sim.world import WorldConfig, world_for
@@ -38,8 +41,9 @@ def run(args: argparse.Namespace) -> int:
     canyon = parse_canyon(args.canyon)
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
-    policy = make_policy(args.policy, seed=args.seed, device=str(resolve_device(args.device)))
-    world = WorldConfig() if args.hz is None else WorldConfig(decision_hz=args.hz)
+    device = str(resolve_device(args.device))
+    policy = make_policy(args.policy, seed=args.seed, which=args.which, device=device)
+    world = WorldConfig(decision_hz=data_rate(args.policy) if args.hz is None else args.hz)
     limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
     env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))
     try:

@@ -15,6 +15,7 @@ from depthq.parallel import add_executor_arguments, executor_from
 _ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",)}
 _HELP = {
     "time_limit_s": "seconds per run",
+    "which": "best, last (= final) or epoch:N",
     "decision_hz": "decisions per second",
 }
 
@@ -29,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--data", type=Path, default=None,
+                   help="a checkpoint's dataset for the offline metrics, if moved [where it was trained]")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.add_argument("--no-video", action="store_true", help="skip video.mp4 of the first canyon")
     add_executor_arguments(p)
@@ -43,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(EvalConfig, args, canyons=parse_canyon_set(args.canyons))
     result = evaluate(
         args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
-        executor=executor_from(args),
+        executor=executor_from(args), data=args.data,
     )
     s = result["summary"]
     if args.json:

@@ -19,13 +19,16 @@ def _frame_size(text: str) -> tuple[int, int]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoint", type=Path, help="a checkpoint folder written by `depthq train`")
     p.add_argument("--out", type=Path, required=True, help="folder for <checkpoint name>.onnx")
-    p.add_argument("--which", default="best", help="best (lowest validation loss) or last")
-    p.add_argument("--frame-size", default="308x410", help="camera frame the graph takes, HEIGHTxWIDTH")
+    p.add_argument("--which", default=None,
+                   help="best (lowest validation loss), last (= final) or epoch:N [the checkpoint's select]")
+    p.add_argument("--frame-size", default=None,
+                   help="camera frame the graph takes, HEIGHTxWIDTH [the checkpoint's: its data's frames]")
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.deploy.onnx_export import export_onnx
 
-    path = export_onnx(args.checkpoint, args.out, which=args.which, frame_size=_frame_size(args.frame_size))
+    frame_size = None if args.frame_size is None else _frame_size(args.frame_size)
+    path = export_onnx(args.checkpoint, args.out, which=args.which, frame_size=frame_size)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB); drive it with the policy onnx:{path}")
     return 0

@@ -2,13 +2,13 @@
 
 Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename):
 
-    config.json              format, provenance (package version), `train` (the full TrainConfig),
-                             `head` (HeadConfig), trunk, trunk_frozen, input_size, learning_rate,
-                             data_fingerprint (`depthq.train.features.dataset_fingerprint`)
+    config.json              what was trained, on which data, for which policy (`depthq.nets.checkpoint`,
+                             which owns the format: this file and the weight files, version, digests)
     best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*"),
     last.safetensors         and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
                              stored, it is rebuilt from the package's pretrained weights
-    best.json, last.json     epoch and metrics of those weights
+    epoch_0040.safetensors   the weights after an epoch of `TrainConfig.snapshots` (kept on resume)
+    best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
                              ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
@@ -19,6 +19,7 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
 
 Weights are safetensors, never pickles, each carrying the SHA-256 of its tensor bytes; reading a
 checkpoint back (`depthq.nets.checkpoint.load_qnet`, below both training and policies) checks it.
+A policy needs nothing but the folder: config.json records its rate, frame size and actions.
 """
 
 from __future__ import annotations
@@ -28,30 +29,35 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 from safetensors import SafetensorError, safe_open
 
-from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.configio import atomic_write_bytes, to_dict, write_json
+from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.nets.checkpoint import (
     CONFIG,
-    FORMAT,
+    DatasetRecord,
+    PolicyRecord,
+    dataset_record,
     load_trainable_state,
     read_config,
     read_weights,
+    snapshot_stem,
     stored_parts,
     weights_bytes,
 )
+from depthq.nets.checkpoint import write_config as write_record
 from depthq.nets.heads import HeadConfig, QNet, build_head
 from depthq.nets.trunk import TRUNKS, build_trunk
+from depthq.sim.sensors import BinConfig
 from depthq.train.config import TrainConfig
 
 STATE = "last_state.safetensors"
 METRICS = "metrics.csv"
-FORMAT_VERSION = 2  # 2: every weight file records its SHA-256
 METRIC_FIELDS = ("epoch", "train_loss", "val_loss", "val_loss_std", "seconds")
 
 
@@ -85,26 +91,12 @@ def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
 # --- starting and resuming -------------------------------------------------------------------------
 
 
-def config_record(config: TrainConfig, fingerprint: str) -> dict[str, Any]:
-    return {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "provenance": provenance(),
-        "train": to_dict(config),
-        "head": to_dict(head_config(config)),
-        "trunk": config.trunk,
-        "trunk_frozen": TRUNKS[config.trunk].frozen,
-        "input_size": config.input_size,
-        "learning_rate": config.learning_rate,
-        "data_fingerprint": fingerprint,
-    }
-
-
 def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     """Whether `out` already holds this training (True: resume it) or is free (False).
 
-    The same training means the same config but for `epochs` (a run may be extended) and `data`
-    (the folder may move; its content is compared by fingerprint). Anything else → ConfigError.
+    The same training means the same config but for `epochs` (a run may be extended), `data`
+    (the folder may move; its content is compared by fingerprint) and `snapshots` (they do not change
+    the training; but an epoch already trained past must have been kept). Anything else → ConfigError.
     """
     if not out.exists():
         return False
@@ -115,24 +107,45 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
             raise ConfigError(f"--out {out}: exists, is not empty and holds no training ({CONFIG} missing)")
         return False
     old = read_config(out)
-    ignore = {"epochs", "data"}
+    ignore = {"epochs", "data", "snapshots"}
     old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
     new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
     differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
     if old.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed
         differing.append("learning_rate (the default for this model changed)")
-    if old.get("data_fingerprint") != fingerprint:
+    if dataset_record(old).fingerprint != fingerprint:
         differing.append("data (the dataset's runs changed)")
     if differing:
         raise ConfigError(
             f"--out {out} holds a training with a different configuration (differs in: "
             f"{', '.join(differing)}); use another folder"
         )
+    done = saved_epoch(out)
+    kept = {e for e in config.snapshots if (out / f"{snapshot_stem(e)}.safetensors").is_file()}
+    lost = [e for e in config.snapshots if e <= done and e not in kept]
+    if lost:
+        raise ConfigError(
+            f"--out {out}: snapshots at epochs {lost} asked for, but its training is past them (epoch "
+            f"{done}) and did not keep them; use another folder"
+        )
     return True
 
 
-def write_config(out: Path, config: TrainConfig, fingerprint: str) -> None:
-    write_json(out / CONFIG, config_record(config, fingerprint))
+def write_config(out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str) -> None:
+    """config.json: the training, its dataset (absolute path, fingerprint, env config as its manifest
+    records it) and what a policy of it needs (`depthq.nets.checkpoint.PolicyRecord`)."""
+    env = dataset.config.get("env")  # none in a robot's recording
+    with dataset.reader(dataset.entries("train")[0]) as reader:
+        height, width, _ = reader.image_shape
+    if env is None:  # a robot's recording: the default rate, and bins made as the bag import makes them
+        from depthq.sim.world import DEFAULT_DECISION_HZ
+
+        rate, bins = DEFAULT_DECISION_HZ, to_dict(BinConfig())
+    else:
+        rate, bins = env["world"]["decision_hz"], env["bins"]
+    policy = PolicyRecord(float(rate), (height, width), ACTIONS, RULE_OF[config.model], bins)
+    where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env)
+    write_record(out, to_dict(config), head_config(config), config.learning_rate, where, policy)
 
 
 def save_epoch(
@@ -142,8 +155,10 @@ def save_epoch(
     rng: np.random.Generator,
     state: TrainState,
     is_best: bool,
+    snapshot: bool = False,
 ) -> None:
-    """Write the epoch's checkpoint: resume state first (one file), then the weights, metrics and logs."""
+    """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
+    also as epoch_NNNN.safetensors), metrics and logs."""
     weights = trainable_state(model)
     optim = optimizer.state_dict()
     tensors = {f"model.{k}": v for k, v in weights.items()}
@@ -161,11 +176,10 @@ def save_epoch(
     atomic_write_bytes(out / STATE, weights_bytes(tensors, {"state": json.dumps(meta)}))
     write_json(out / "last_state.json", meta)
     blob = weights_bytes(weights, {"epoch": str(state.epoch)})
-    atomic_write_bytes(out / "last.safetensors", blob)
-    write_json(out / "last.json", state.history[-1])
-    if is_best:
-        atomic_write_bytes(out / "best.safetensors", blob)
-        write_json(out / "best.json", state.history[-1])
+    also = (["best"] if is_best else []) + ([snapshot_stem(state.epoch)] if snapshot else [])
+    for stem in ("last", *also):
+        atomic_write_bytes(out / f"{stem}.safetensors", blob)
+        write_json(out / f"{stem}.json", state.history[-1])
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()

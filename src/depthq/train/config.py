@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from depthq.data import DataConfig
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
+from depthq.nets.checkpoint import SELECT
 from depthq.nets.heads import HEAD_KINDS
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
@@ -77,6 +78,13 @@ class TrainConfig:
     every_run_end: bool = True
     action_clip: float = 1.0
     action_lag: int = 0
+    # The weights a policy of this checkpoint uses unless told (`--which`): "best" (lowest validation
+    # loss) or "final" (after the last epoch: the original evaluated its final weights, no
+    # best-validation checkpoint). Training is the same either way.
+    select: str = "best"
+    # Epochs whose weights are kept as well (epoch_0040.safetensors, `--which epoch:40`), so that one
+    # long training also gives the policies of shorter ones.
+    snapshots: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         if self.model not in HEAD_KINDS:
@@ -103,7 +111,22 @@ class TrainConfig:
             raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
         if self.depth_loss not in DEPTH_LOSSES:
             raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
+        if self.select not in SELECT:
+            raise ConfigError(f"train.select must be one of {SELECT}, got {self.select!r}")
+        self._check_snapshots()
         self.labels()  # checks the label fields
+
+    def _check_snapshots(self) -> None:
+        if not isinstance(self.snapshots, tuple):
+            raise ConfigError(f"train.snapshots must be a tuple of epochs, got {self.snapshots!r}")
+        for epoch in self.snapshots:
+            if isinstance(epoch, bool) or not isinstance(epoch, int) or not 1 <= epoch <= self.epochs:
+                raise ConfigError(
+                    f"train.snapshots: epoch {epoch!r} is not one of this training's epochs 1..{self.epochs}"
+                )
+        repeated = sorted({e for e in self.snapshots if self.snapshots.count(e) > 1})
+        if repeated:
+            raise ConfigError(f"train.snapshots repeats epoch(s) {repeated}: {self.snapshots}")
 
     def labels(self) -> DataConfig:
         """How the dataset's runs become this training's samples."""

@@ -57,7 +57,7 @@ def train(
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
-    checkpoint.write_config(out, config, fingerprint)
+    checkpoint.write_config(out, config, dataset, fingerprint)
 
     torch.set_num_threads(threads or cores())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
@@ -104,7 +104,7 @@ def train(
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
             state = checkpoint.TrainState(epoch, [*state.history, row], row if is_best else state.best)
-            checkpoint.save_epoch(out, model, optimizer, rng, state, is_best)
+            checkpoint.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots)
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")

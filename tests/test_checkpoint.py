@@ -1,0 +1,189 @@
+"""Checkpoints that describe themselves (a policy needs nothing but the folder), the format's
+versions, and which weights a policy uses (`select`, snapshots). Real MuJoCo runs, real trainings of
+a few batches, no mocks."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import onnx
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from depthq.cli import main
+from depthq.configio import read_json
+from depthq.control.qnet_policy import QNetPolicy
+from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import EvalConfig, evaluate
+from depthq.nets.checkpoint import FORMAT_VERSION, load_qnet, read_config
+from depthq.sim.world import DEFAULT_DECISION_HZ
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+
+FAST = {"train_batches": 1, "val_batches": 1, "batch_size": 16}  # an Adadelta step of the head: ≈ 0.5 s
+
+
+@pytest.fixture
+def data(small_dataset: Path) -> Path:
+    """conftest's small dataset (6 + 2 runs at the default rate, features cached); never changed."""
+    return small_dataset
+
+
+def _config(data: Path, **kwargs: object) -> TrainConfig:
+    return TrainConfig(**{"model": "depth", "data": str(data), "epochs": 2, **FAST, **kwargs})
+
+
+def _tensors(path: Path) -> dict[str, torch.Tensor]:
+    return dict(load_file(path))
+
+
+def _equal(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benches(
+    data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    a, b, c = (tmp_path / name for name in "abc")
+    shutil.copytree(data, a / "data")
+    monkeypatch.chdir(a)
+    assert main(["train", "--model", "depth", "--data", "data", "--epochs", "1", "--train-batches", "2",
+                 "--val-batches", "1", "--batch-size", "16", "--out", "ckpt", "--no-progress"]) == 0
+    record = read_json(a / "ckpt" / "config.json")
+    assert record["format_version"] == FORMAT_VERSION == 3
+    assert record["dataset"]["path"] == str((a / "data").resolve())
+    assert record["dataset"]["env"] == Dataset.open(data).config["env"]  # the manifest's, verbatim
+    policy = record["policy"]
+    assert (policy["decision_hz"], policy["frame_size"]) == (DEFAULT_DECISION_HZ, [308, 410])
+    assert policy["actions"] == [-1, 0, 1] and policy["selection"] == "farthest_nearest_bin"
+    assert policy["bins"]["clip"] == 2.0
+    assert record["train"]["select"] == "best" and record["provenance"]["package"] == "depthq"
+
+    b.mkdir()
+    shutil.move(a / "ckpt", b / "ckpt")
+    shutil.rmtree(a / "data")
+    # As if trained on 5 Hz data: what a policy drives at must come from the checkpoint.
+    record["policy"]["decision_hz"] = HZ = 5.0
+    (b / "ckpt" / "config.json").write_text(json.dumps(record))
+    ckpt = str(b / "ckpt")
+    c.mkdir()
+    monkeypatch.chdir(c)
+    capsys.readouterr()
+    assert main(["evaluate", ckpt, "--canyons", "eval:0", "--time-limit", "2", "--workers", "1",
+                 "--no-video", "--out", "eval"]) == 0
+    assert "offline metrics skipped: its dataset is not found" in capsys.readouterr().err
+    summary = read_json(c / "eval" / "summary.json")
+    assert summary["config"]["decision_hz"] == HZ and "offline" not in summary
+    assert summary["runs"][0]["steps"] <= 2 * HZ and summary["policy"]["weights"] == "best"
+
+    assert main(["drive", "--policy", ckpt, "--canyon", "eval:0", "--time-limit", "2", "--frames", "2",
+                 "--out", "drive", "--json"]) == 0
+    drive = json.loads(capsys.readouterr().out)
+    last_frame = max(int(p.stem.split("_")[1]) for p in (c / "drive").glob("frame_*.png"))
+    assert last_frame == round(drive["time"] * HZ) > 0  # one decision (and frame) every 0.2 s
+
+    assert main(["export", ckpt, "--out", "onnx"]) == 0
+    meta = {p.key: p.value for p in onnx.load(c / "onnx" / "ckpt.onnx").metadata_props}
+    assert json.loads(meta["depthq.frame_size"]) == [308, 410]
+    assert json.loads(meta["depthq.actions"]) == [-1.0, 0.0, 1.0]
+
+    assert main(["bench", "policy", "--policy", ckpt, "--decisions", "3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out.splitlines()[-1])["policies"][0]["policy"] == "DQN:ckpt"
+
+    # The data given back by hand: the same runs give the offline metric, other runs are refused.
+    other = tmp_path / "other"
+    shutil.copytree(data, other, ignore=shutil.ignore_patterns("features"))
+    manifest = read_json(other / "manifest.json")
+    manifest["runs"] = manifest["runs"][1:]
+    (other / "manifest.json").write_text(json.dumps(manifest))
+    assert main(["evaluate", ckpt, "--data", str(other), "--canyons", "eval:0", "--out", "refused"]) == 2
+    err = capsys.readouterr().err
+    assert f"--data {other}: not the dataset this checkpoint was trained on" in err
+    assert not (c / "refused").exists()
+    assert main(["evaluate", ckpt, "--data", str(data), "--canyons", "eval:0", "--time-limit", "1",
+                 "--workers", "1", "--no-video", "--out", "with-data"]) == 0
+    assert read_json(c / "with-data" / "summary.json")["offline"]["metric"] == "abs_diff"
+
+
+def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: Path) -> None:
+    out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
+    record = read_json(out / "config.json")
+
+    future = tmp_path / "future"
+    shutil.copytree(out, future)
+    (future / "config.json").write_text(json.dumps({**record, "format_version": 7}))
+    with pytest.raises(ConfigError, match=r"future/config\.json: checkpoint format version 7, .* 1 to 3"):
+        load_qnet(future)
+    assert main(["export", str(future), "--out", str(tmp_path / "onnx")]) == 2
+
+    # Version 2, the layout before `dataset` and `policy`: its rate from its dataset's manifest.
+    old = tmp_path / "v2"
+    shutil.copytree(out, old)
+    v2 = {k: v for k, v in record.items() if k not in ("dataset", "policy")}
+    v2["train"] = {k: v for k, v in record["train"].items() if k not in ("select", "snapshots")}
+    (old / "config.json").write_text(json.dumps(
+        {**v2, "format_version": 2, "data_fingerprint": record["dataset"]["fingerprint"]}
+    ))
+    net, upgraded = load_qnet(old)
+    assert upgraded["policy"] == record["policy"] and upgraded["train"] == record["train"]
+    head = {f"head.{k}": v for k, v in net.head.state_dict().items()}
+    assert _equal(_tensors(old / "best.safetensors"), head)
+    assert train(_config(data, epochs=2), old, progress=False) == old  # resumed: the same training
+    assert read_json(old / "config.json")["format_version"] == 3
+
+
+def test_select_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path: Path) -> None:
+    # Coll-Q-Net at its default rate over-fits this tiny dataset from the first epoch: best ≠ final.
+    out = train(_config(data, model="coll", epochs=3, select="final"), tmp_path / "coll", progress=False)
+    assert read_json(out / "best.json")["epoch"] < 3 == read_json(out / "last.json")["epoch"]
+    best, last = _tensors(out / "best.safetensors"), _tensors(out / "last.safetensors")
+    assert not _equal(best, last)
+    head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(out).net.head.state_dict().items()}
+    assert _equal(head, last)
+    head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(out, "best").net.head.state_dict().items()}
+    assert _equal(head, best)  # --which overrides
+
+    config = EvalConfig(canyons=("eval:0",), time_limit_s=1.0)
+    summary = evaluate(str(out), tmp_path / "eval", config, workers=1, progress=False, video=False)
+    assert summary["policy"]["weights"] == "last" and summary["offline"]["weights"] == "last"
+    assert read_config(out)["train"]["select"] == "final"
+
+
+def test_snapshots_are_kept_loadable_and_survive_a_resume(data: Path, tmp_path: Path) -> None:
+    whole = train(_config(data, epochs=4, snapshots=(1, 3)), tmp_path / "whole", progress=False)
+    assert sorted(p.name for p in whole.glob("epoch_*")) == [
+        "epoch_0001.json", "epoch_0001.safetensors", "epoch_0003.json", "epoch_0003.safetensors"
+    ]
+    net, _ = load_qnet(whole, "epoch:3")
+    head = {f"head.{k}": v for k, v in net.head.state_dict().items()}
+    assert _equal(head, _tensors(whole / "epoch_0003.safetensors"))
+    assert read_json(whole / "epoch_0003.json")["epoch"] == 3
+    with pytest.raises(ConfigError, match=r"no epoch_0002\.safetensors .* snapshots are at epochs \[1, 3\]"):
+        load_qnet(whole, "epoch:2")
+
+    split = train(_config(data, epochs=2, snapshots=(1,)), tmp_path / "split", progress=False)
+    train(_config(data, epochs=4, snapshots=(1, 3)), split, progress=False)  # resumes epochs 3 and 4
+    for name in ("epoch_0001", "epoch_0003", "last"):
+        assert _equal(_tensors(whole / f"{name}.safetensors"), _tensors(split / f"{name}.safetensors"))
+    with pytest.raises(ConfigError, match=r"snapshots at epochs \[2\] asked for, but its training is past"):
+        train(_config(data, epochs=4, snapshots=(2, 3)), split, progress=False)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"snapshots": (0,)}, "epoch 0 is not one of"),
+        ({"snapshots": (5,)}, r"epoch 5 is not one of this training's epochs 1\.\.2"),
+        ({"snapshots": (1, 1)}, r"repeats epoch\(s\) \[1\]"),
+        ({"select": "worst"}, "'worst'"),
+    ],
+)
+def test_bad_select_or_snapshots_are_refused_by_name(change: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        TrainConfig(model="depth", data="data", epochs=2, **change)
+    with pytest.raises(ConfigError, match="'epoch:x'"):
+        EvalConfig(which="epoch:x")
