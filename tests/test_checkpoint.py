@@ -187,3 +187,21 @@ def test_bad_select_or_snapshots_are_refused_by_name(change: dict, message: str)
         TrainConfig(model="depth", data="data", epochs=2, **change)
     with pytest.raises(ConfigError, match="'epoch:x'"):
         EvalConfig(which="epoch:x")
+
+
+def test_a_sweep_varies_select_and_snapshots() -> None:
+    from dataclasses import replace
+
+    from depthq.report.presets import get_preset
+    from depthq.report.sweep import parse_setting
+
+    assert parse_setting("select=final") == ("select", ("final",))
+    assert parse_setting("snapshots=40,20+40") == ("snapshots", ((40,), (20, 40)))
+    grid = (parse_setting("select=final"), parse_setting("epochs=3"), parse_setting("snapshots=1+2"))
+    sweep = replace(get_preset("smoke"), grid=grid)
+    model = sweep.models()[0]
+    assert model.name.endswith("_selectfinal_epochs3_snapshots1+2")
+    config = sweep.train_config(model, "data")
+    assert (config.select, config.epochs, config.snapshots) == ("final", 3, (1, 2))
+    with pytest.raises(ConfigError, match=r"epoch 4 is not one of this training's epochs 1\.\.3"):
+        replace(sweep, grid=(*grid[:2], parse_setting("snapshots=4")))
