@@ -15,10 +15,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.control.heuristic import DepthHeuristic
+from depthq.control.registry import make_policy
 from depthq.errors import ConfigError
+from depthq.evaluate.figures import plot_fig4, plot_trajectories
 from depthq.evaluate.metrics import (
     distance_from_spawn,
     distance_to_collision,
@@ -26,10 +30,12 @@ from depthq.evaluate.metrics import (
     run_success,
     summarize,
 )
-from depthq.nets.checkpoint import weights_stem
+from depthq.evaluate.video import VIDEO_SCALE, write_video
+from depthq.nets.checkpoint import policy_record, read_config, weights_stem
+from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, CanyonId, eval_canyon_ids, split_family
-from depthq.sim.env import EnvConfig
+from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
 from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig, world_for
 
 RUN_FIELDS = (
@@ -84,8 +90,6 @@ class EvalConfig:
 
 def data_rate(policy_spec: str) -> float:
     """The decision rate a checkpoint records (its training data's); the default for any other policy."""
-    from depthq.nets.checkpoint import policy_record, read_config
-
     if not Path(policy_spec).is_dir():
         return DEFAULT_DECISION_HZ
     return policy_record(read_config(Path(policy_spec))).decision_hz
@@ -122,9 +126,6 @@ def drive(
 ) -> dict[str, Any]:
     """One run: the policy drives, the expert is asked on the same observations. `keep_every` keeps
     Fig. 4 snapshots; `video` keeps every decision (the camera frame at half size) for the MP4."""
-    from depthq.evaluate.video import VIDEO_SCALE
-    from depthq.sim.env import parse_canyon
-
     obs, info = env.reset(seed=seed, options={"canyon": parse_canyon(canyon)})
     policy.reset(seed)
     poses, actions, expert_actions, ms, snaps, frames = [info["pose"]], [], [], [], [], []
@@ -186,12 +187,6 @@ class _EvalWorker:
     def __init__(
         self, policy_spec: str, config: EvalConfig, device: str = "cpu", video: bool = False
     ) -> None:
-        import torch
-
-        from depthq.control.heuristic import DepthHeuristic
-        from depthq.control.registry import make_policy
-        from depthq.sim.env import CanyonEnv
-
         torch.set_num_threads(1)  # same float sums in every process: results independent of W
         self.seed, self.video = config.seed, video
         self.policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
@@ -225,16 +220,14 @@ def evaluate(
     (`depthq.evaluate.offline`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
-    from depthq.control.registry import make_policy
-    from depthq.nets.device import resolve_device
 
     where = str(resolve_device(device))
     # a bad spec fails here, before any worker starts
     description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
+        # the training stack (tensorboard included) only for a checkpoint, not in every worker
         from depthq.evaluate.offline import training_data
-        from depthq.nets.checkpoint import read_config
 
         policy_spec = str(Path(policy_spec).resolve())
         executor.check_shared(Path(policy_spec))
@@ -259,7 +252,7 @@ def evaluate(
     ordered = [runs[k] for k in sorted(runs)]
     offline = None
     if dataset is not None:
-        from depthq.evaluate.offline import offline_metric
+        from depthq.evaluate.offline import offline_metric  # the training stack, as above
 
         offline = offline_metric(Path(policy_spec), dataset, which=config.which)
     summary = {
@@ -277,9 +270,6 @@ def evaluate(
 
 def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float) -> None:
     """summary.json last: a folder with a summary is complete."""
-    from depthq.evaluate.figures import plot_fig4, plot_trajectories
-    from depthq.evaluate.video import write_video
-
     out.mkdir(parents=True, exist_ok=True)
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=RUN_FIELDS)
