@@ -47,6 +47,7 @@ from safetensors.torch import save as save_safetensors
 
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
 from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
 from depthq.nets.trunk import TRUNKS, build_trunk
@@ -207,8 +208,6 @@ def read_config(folder: Path) -> dict[str, Any]:
 def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
     """A version 1 or 2 record in version 3's shape: the policy it was trained for, its dataset as
     its manifest says (when that is found where the record points, relative paths from here)."""
-    from depthq.data.manifest import Dataset
-
     train = {"select": "best", "snapshots": [], **record.get("train", {})}
     data = Path(str(train.get("data")))
     try:

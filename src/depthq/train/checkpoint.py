@@ -138,7 +138,7 @@ def write_config(out: Path, config: TrainConfig, dataset: Dataset, fingerprint: 
     with dataset.reader(dataset.entries("train")[0]) as reader:
         height, width, _ = reader.image_shape
     if env is None:  # a robot's recording: the default rate, and bins made as the bag import makes them
-        from depthq.sim.world import DEFAULT_DECISION_HZ
+        from depthq.sim.world import DEFAULT_DECISION_HZ  # MuJoCo: training loads it nowhere else
 
         rate, bins = DEFAULT_DECISION_HZ, to_dict(BinConfig())
     else:
