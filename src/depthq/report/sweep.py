@@ -13,15 +13,14 @@ import itertools
 import json
 import re
 from dataclasses import dataclass, fields, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from depthq.errors import ConfigError
+from depthq.evaluate.evaluate import parse_canyon_set
 from depthq.report.layout import NETS, model_name, setting_text
-from depthq.sim.canyon import FAMILIES, PAPER
+from depthq.sim.canyon import FAMILIES, PAPER, split_family
 from depthq.sim.world import DEFAULT_DECISION_HZ
-
-if TYPE_CHECKING:
-    from depthq.train.config import TrainConfig
+from depthq.train.config import TrainConfig
 
 Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field, value) pairs; () is the preset's own setting
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
@@ -68,8 +67,6 @@ class Sweep:
     family: str = PAPER  # the canyon family the dataset is collected in (`canyons` may name another)
 
     def __post_init__(self) -> None:
-        from depthq.evaluate.evaluate import parse_canyon_set
-
         if self.family not in FAMILIES:
             raise ConfigError(
                 f"sweep {self.name}: unknown canyon family {self.family!r}; one of {sorted(FAMILIES)}"
@@ -104,8 +101,6 @@ class Sweep:
         ]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
-        from depthq.train.config import TrainConfig
-
         budget = {} if self.epochs is None else {"epochs": self.epochs}
         return TrainConfig(
             model=model.net,
@@ -134,8 +129,6 @@ def retarget(
     """`sweep` with its data collected in canyon `family`, evaluated in `canyons` (by default that
     family's eval canyons; e.g. 'hard/val:1000-1019' to choose on val canyons) at `decision_hz`.
     Evaluation canyons of another family than the sweep's own bring their family's time limit."""
-    from depthq.sim.canyon import split_family
-
     changes: dict[str, Any] = {}
     if family is not None and family != sweep.family:
         if family not in FAMILIES:
@@ -174,8 +167,6 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
 def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field and the values to try. A
     tuple field takes each value as items joined by '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
-    from depthq.train.config import TrainConfig
-
     key, sep, raw = text.partition("=")
     key = key.strip().replace("-", "_")  # the flag's spelling (depthq train --action-scale) or the field's
     defaults = {f.name: f.default for f in fields(TrainConfig)}
