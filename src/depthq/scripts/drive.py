@@ -7,9 +7,11 @@ import json
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from depthq.errors import ConfigError
 from depthq.nets.device import DEVICE_HELP, resolve_device
+from depthq.sim.canyon import FAMILIES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,11 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from PIL import Image
-
+    # MuJoCo and torch: when this verb runs, not at the CLI's startup
     from depthq.control.registry import make_policy
     from depthq.evaluate.evaluate import data_rate
-    from depthq.sim.canyon import FAMILIES
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
     from depthq.sim.world import WorldConfig, world_for
 

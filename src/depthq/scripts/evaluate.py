@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set  # MuJoCo and torch
 
     config = config_from_args(EvalConfig, args, canyons=parse_canyon_set(args.canyons))
     result = evaluate(

@@ -26,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.deploy.onnx_export import export_onnx
+    from depthq.deploy.onnx_export import export_onnx  # torch: when this verb runs
 
     frame_size = None if args.frame_size is None else _frame_size(args.frame_size)
     path = export_onnx(args.checkpoint, args.out, which=args.which, frame_size=frame_size)
