@@ -45,6 +45,7 @@ def _equal(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
     return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
+@pytest.mark.slow
 def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benches(
     data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -109,6 +110,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert read_json(c / "with-data" / "summary.json")["offline"]["metric"] == "abs_diff"
 
 
+@pytest.mark.slow
 def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: Path) -> None:
     out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
     record = read_json(out / "config.json")
@@ -136,6 +138,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert read_json(old / "config.json")["format_version"] == 3
 
 
+@pytest.mark.slow
 def test_select_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path: Path) -> None:
     # Coll-Q-Net at its default rate over-fits this tiny dataset from the first epoch: best ≠ final.
     out = train(_config(data, model="coll", epochs=3, select="final"), tmp_path / "coll", progress=False)
@@ -153,6 +156,7 @@ def test_select_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path:
     assert read_config(out)["train"]["select"] == "final"
 
 
+@pytest.mark.slow
 def test_snapshots_are_kept_loadable_and_survive_a_resume(data: Path, tmp_path: Path) -> None:
     whole = train(_config(data, epochs=4, snapshots=(1, 3)), tmp_path / "whole", progress=False)
     assert sorted(p.name for p in whole.glob("epoch_*")) == [
