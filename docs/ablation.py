@@ -1,0 +1,187 @@
+"""The ablation ladder (docs/ablation.md): from our defaults to the paper's settings, one factor at a
+time and all together, both networks, 200 and 500 runs, seeds 0 and 1, in `val` canyons only.
+
+    python docs/ablation.py run hard runs/ladder-hard      # runs (or resumes) every rung's sweep
+    python docs/ablation.py table hard runs/ladder-hard    # ablation.md, ablation.png of what finished
+
+Every rung is a `depthq sweep` into OUT/4hz (or OUT/10hz: another rate is another dataset), so an
+interrupted ladder resumes with the same command and a rung shared with another ladder is reused.
+Rungs run seed 0 first, so a partial ladder already has a whole column of rungs.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from depthq.cli import main as depthq
+from depthq.configio import read_json
+from depthq.report.presets import get_preset
+from depthq.report.sweep import Sweep, parse_setting, retarget
+from depthq.report.tables import interval
+
+SIZES, SEEDS = (200, 500), (0, 1)
+LADDERS = {  # family: (preset, val canyons)
+    "hard": ("hard", "hard/val:1000-1019"),
+    "paper": ("paper", "val:1000-1019"),
+}
+PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "select=final")
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One step of the ladder: training settings (`depthq sweep --set`), per network, and a rate."""
+
+    name: str
+    sets: tuple[str, ...] = ()
+    nets: tuple[str, ...] = ("depth", "coll")
+    hz: float = 4.0
+    coll_sets: tuple[str, ...] = ()  # Coll-Q-Net only (the paper's lr differs between the networks)
+
+    def settings(self, net: str) -> tuple[str, ...]:
+        return self.sets + (self.coll_sets if net == "coll" else ())
+
+
+# Ours: column feature, action ×10, lr 0.1 for both, no dropout, best-validation weights of 40 epochs,
+# 4 decisions/s. The paper: pooled feature, raw action, Coll-Q-Net lr 0.01, dropout 0.5, the final
+# weights of a long training, 10 Hz. Cheapest rungs first: a partial ladder is still a table.
+RUNGS = (
+    Rung("ours"),
+    Rung("action ×1", ("action_scale=1",)),
+    Rung("Coll-Q-Net lr 0.01", nets=("coll",), coll_sets=("lr=0.01",)),
+    Rung("dropout 0.5", ("dropout=0.5",)),
+    Rung("pooled feature", ("trunk=efficientnet_lite0",)),
+    Rung("10 Hz", hz=10.0),
+    Rung("final weights after 200 epochs", ("epochs=200", "select=final")),
+    Rung("all the paper's settings, 10 Hz", PAPER_SETTINGS, hz=10.0, coll_sets=("lr=0.01",)),
+)
+
+
+def folder(out: Path, rung: Rung) -> Path:
+    return out / f"{rung.hz:g}hz"
+
+
+def sweep_args(family: str, rung: Rung, net: str, seeds: tuple[int, ...], out: Path) -> list[str]:
+    preset, canyons = LADDERS[family]
+    args = ["sweep", "--preset", preset, "--canyons", canyons, "--sizes", ",".join(map(str, SIZES)),
+            "--seeds", ",".join(map(str, seeds)), "--nets", net, "--hz", f"{rung.hz:g}",
+            "--out", str(folder(out, rung))]
+    for setting in rung.settings(net):
+        args += ["--set", setting]
+    return args
+
+
+def sweep_of(family: str, rung: Rung, net: str) -> Sweep:
+    """The Sweep that `sweep_args` runs, to find its models' folders."""
+    preset, canyons = LADDERS[family]
+    grid = tuple(parse_setting(s) for s in rung.settings(net))
+    return replace(retarget(get_preset(preset), None, canyons, rung.hz),
+                   subsets=SIZES, seeds=SEEDS, nets=(net,), grid=grid)
+
+
+def run(family: str, out: Path) -> int:
+    for seed in SEEDS:
+        for rung in RUNGS:
+            for net in rung.nets:
+                args = sweep_args(family, rung, net, (seed,), out)
+                print("depthq " + " ".join(args), flush=True)
+                if (status := depthq(args)) != 0:
+                    return status
+    return table(family, out)
+
+
+def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
+    summary = root / "eval" / name / "summary.json"
+    if not summary.is_file():
+        return None
+    s = read_json(summary)
+    config = read_json(root / "models" / name / "config.json")
+    which = config.get("train", {}).get("select", "best")
+    weights = read_json(root / "models" / name / ("last.json" if which == "final" else "best.json"))
+    return {
+        "successes": s["successes"],
+        "distance": s["distance_to_collision_mean"] if hard else s["distance_mean"],
+        "closest": s["closest_mean"],
+        "val_loss": weights["val_loss"],
+    }
+
+
+def _cell(values: list[float], fmt: str) -> str:
+    if not values:
+        return "–"
+    text = f"{np.mean(values):{fmt}}"
+    if (ci := interval(values)) is not None:
+        text += f" [{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
+    return text + ("" if len(values) == len(SEEDS) else f" ({len(values)} seed)")
+
+
+def results(family: str, out: Path) -> list[dict[str, Any]]:
+    rows = []
+    for rung in RUNGS:
+        for net in rung.nets:
+            sweep = sweep_of(family, rung, net)
+            for n in SIZES:
+                cells = [m for model in sweep.models() if model.runs == n
+                         if (m := _metrics(folder(out, rung), model.name, family == "hard")) is not None]
+                rows.append({"rung": rung.name, "net": net, "runs": n, "cells": cells})
+    return rows
+
+
+def table(family: str, out: Path) -> int:
+    distance = "to first collision (m)" if family == "hard" else "distance (m)"
+    lines = [f"| rung | network | runs | successes / 20 | {distance} | closest (m) | val loss |",
+             "|---|---|---|---|---|---|---|"]
+    rows = results(family, out)
+    for row in rows:
+        cells = row["cells"]
+        net = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}[row["net"]]
+        values = {k: [c[k] for c in cells] for k in ("successes", "distance", "closest", "val_loss")}
+        lines.append(f"| {row['rung']} | {net} | {row['runs']} | {_cell(values['successes'], '.1f')} | "
+                     f"{_cell(values['distance'], '.2f')} | {_cell(values['closest'], '.2f')} | "
+                     f"{_cell(values['val_loss'], '.4f')} |")
+    note = (f"Mean over seeds {', '.join(map(str, SEEDS))} [95 % Student-t interval]; "
+            f"{LADDERS[family][1]}, `python docs/ablation.py run {family} OUT`.\n\n")
+    (out / "ablation.md").write_text(note + "\n".join(lines) + "\n")
+    _figure(rows, out / "ablation.png", family)
+    print((out / "ablation.md").read_text())
+    return 0
+
+
+def _figure(rows: list[dict[str, Any]], path: Path, family: str) -> None:
+    """Successes per rung: one bar per (network, size) at the seeds' mean, each seed a dot."""
+    groups = [(net, n) for net in ("depth", "coll") for n in SIZES]
+    fig, ax = plt.subplots(figsize=(10, 4.2))
+    width = 0.8 / len(groups)
+    for g, (net, n) in enumerate(groups):
+        for r, rung in enumerate(RUNGS):
+            cells = next((row["cells"] for row in rows
+                          if row["rung"] == rung.name and row["net"] == net and row["runs"] == n), [])
+            x = r + (g - (len(groups) - 1) / 2) * width
+            colour = f"C{g}"
+            if cells:
+                ax.bar(x, np.mean([c["successes"] for c in cells]), width, color=colour, alpha=0.6,
+                       label=f"{'DQN' if net == 'depth' else 'CQN'} {n} runs" if r == 0 else None)
+                ax.plot([x] * len(cells), [c["successes"] for c in cells], "k.", ms=4)
+    ax.set_xticks(range(len(RUNGS)), [rung.name for rung in RUNGS], rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel("successes / 20 val canyons")
+    ax.set_ylim(0, 20.5)
+    ax.set_title(f"Ablation ladder, {family} canyons ({LADDERS[family][1]})")
+    ax.legend(fontsize=8, ncols=4, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 4 or sys.argv[1] not in ("run", "table") or sys.argv[2] not in LADDERS:
+        sys.exit(__doc__)
+    verb, family, out = sys.argv[1], sys.argv[2], Path(sys.argv[3])
+    sys.exit(run(family, out) if verb == "run" else table(family, out))
