@@ -162,3 +162,19 @@ def test_sweep_setup_records_the_family_and_refuses_another(tmp_path):
     assert read_json(old / "reproduce.json")["sweep"]["family"] == "paper"
     with pytest.raises(ConfigError, match="family 'paper' there, 'hard' here"):
         _claim(old, retarget(PRESETS["smoke"], family="hard"))
+
+
+@pytest.mark.slow
+def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_path):
+    """A network trained on hard canyons is tested in hard ones unless told otherwise."""
+    from depthq.data.collect import CollectConfig, collect, exploration_env
+    from depthq.evaluate.evaluate import default_canyons
+    from depthq.train.config import TrainConfig
+    from depthq.train.trainer import train
+
+    config = CollectConfig(runs=2, val_runs=1, max_steps=60, env=exploration_env(family="hard"))
+    collect(tmp_path / "d", config, seed=0, progress=False)
+    settings = TrainConfig(model="depth", data=str(tmp_path / "d"), epochs=1, train_batches=1, val_batches=1)
+    checkpoint = train(settings, tmp_path / "ckpt", progress=False)
+    assert default_canyons(str(checkpoint)) == "hard/eval"
+    assert default_canyons("heuristic") == "eval"

@@ -31,10 +31,10 @@ from depthq.evaluate.metrics import (
     summarize,
 )
 from depthq.evaluate.video import VIDEO_SCALE, write_video
-from depthq.nets.checkpoint import policy_record, read_config, weights_stem
+from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
-from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, CanyonId, eval_canyon_ids, split_family
+from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, PAPER, CanyonId, eval_canyon_ids, split_family
 from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
 from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig, world_for
 
@@ -93,6 +93,16 @@ def data_rate(policy_spec: str) -> float:
     if not Path(policy_spec).is_dir():
         return DEFAULT_DECISION_HZ
     return policy_record(read_config(Path(policy_spec))).decision_hz
+
+
+def default_canyons(policy_spec: str) -> str:
+    """The evaluation canyons of the family a checkpoint's data was collected in ('eval' for the
+    paper's, 'hard/eval', ...); the paper's for any other policy and for a robot's recording."""
+    if not Path(policy_spec).is_dir():
+        return "eval"
+    env = dataset_record(read_config(Path(policy_spec))).env or {}
+    family = env.get("world", {}).get("family", PAPER)
+    return "eval" if family == PAPER else f"{family}/eval"
 
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:

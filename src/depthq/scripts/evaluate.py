@@ -23,9 +23,9 @@ _HELP = {
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="'heuristic', 'ou', a checkpoint folder or 'onnx:PATH'")
     p.add_argument(
-        "--canyons", default="eval",
+        "--canyons", default=None,
         help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'; another canyon family in front: "
-        "'hard/eval', 'hard/val:1000-1019'",
+        "'hard/eval', 'hard/val:1000-1019' (default: the eval canyons of a checkpoint's canyon family)",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
@@ -41,9 +41,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set  # MuJoCo and torch
+    from depthq.evaluate.evaluate import (  # MuJoCo and torch
+        EvalConfig,
+        default_canyons,
+        evaluate,
+        parse_canyon_set,
+    )
 
-    config = config_from_args(EvalConfig, args, canyons=parse_canyon_set(args.canyons))
+    canyons = parse_canyon_set(args.canyons or default_canyons(args.policy))
+    config = config_from_args(EvalConfig, args, canyons=canyons)
     result = evaluate(
         args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
         executor=executor_from(args), data=args.data,
