@@ -102,7 +102,7 @@ def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
     summary = root / "eval" / name / "summary.json"
     if not summary.is_file():
         return None
-    s = read_json(summary)
+    s = read_json(summary)["summary"]
     config = read_json(root / "models" / name / "config.json")
     which = config.get("train", {}).get("select", "best")
     weights = read_json(root / "models" / name / ("last.json" if which == "final" else "best.json"))
