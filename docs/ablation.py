@@ -156,25 +156,29 @@ def table(family: str, out: Path) -> int:
 
 
 def _figure(rows: list[dict[str, Any]], path: Path, family: str) -> None:
-    """Successes per rung: one bar per (network, size) at the seeds' mean, each seed a dot."""
+    """Per rung, successes and the distance metric: one bar per (network, size) at the seeds' mean,
+    each seed a dot (the distance does not saturate where successes are all 0 or all 20)."""
     groups = [(net, n) for net in ("depth", "coll") for n in SIZES]
-    fig, ax = plt.subplots(figsize=(10, 4.2))
+    distance = "to first collision (m)" if family == "hard" else "distance (m)"
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
     width = 0.8 / len(groups)
-    for g, (net, n) in enumerate(groups):
-        for r, rung in enumerate(RUNGS):
-            cells = next((row["cells"] for row in rows
-                          if row["rung"] == rung.name and row["net"] == net and row["runs"] == n), [])
-            x = r + (g - (len(groups) - 1) / 2) * width
-            colour = f"C{g}"
-            if cells:
-                ax.bar(x, np.mean([c["successes"] for c in cells]), width, color=colour, alpha=0.6,
+    for ax, key, label in ((axes[0], "successes", "successes / 20"), (axes[1], "distance", distance)):
+        for g, (net, n) in enumerate(groups):
+            for r, rung in enumerate(RUNGS):
+                cells = next((row["cells"] for row in rows
+                              if row["rung"] == rung.name and row["net"] == net and row["runs"] == n), [])
+                if not cells:
+                    continue
+                x = r + (g - (len(groups) - 1) / 2) * width
+                values = [c[key] for c in cells]
+                ax.bar(x, np.mean(values), width, color=f"C{g}", alpha=0.6,
                        label=f"{'DQN' if net == 'depth' else 'CQN'} {n} runs" if r == 0 else None)
-                ax.plot([x] * len(cells), [c["successes"] for c in cells], "k.", ms=4)
-    ax.set_xticks(range(len(RUNGS)), [rung.name for rung in RUNGS], rotation=20, ha="right", fontsize=8)
-    ax.set_ylabel("successes / 20 val canyons")
-    ax.set_ylim(0, 20.5)
-    ax.set_title(f"Ablation ladder, {family} canyons ({LADDERS[family][1]})")
-    ax.legend(fontsize=8, ncols=4, loc="lower left")
+                ax.plot([x] * len(values), values, "k.", ms=4)
+        ax.set_ylabel(label)
+    axes[0].set_ylim(0, 20.5)
+    axes[0].legend(fontsize=8, ncols=4, loc="upper right")
+    axes[0].set_title(f"Ablation ladder, {family} canyons ({LADDERS[family][1]}); dots: seeds")
+    axes[1].set_xticks(range(len(RUNGS)), [rung.name for rung in RUNGS], rotation=20, ha="right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
