@@ -34,7 +34,15 @@ from depthq.evaluate.video import VIDEO_SCALE, write_video
 from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
-from depthq.sim.canyon import FAMILIES, N_EVAL_CANYONS, PAPER, CanyonId, eval_canyon_ids, split_family
+from depthq.sim.canyon import (
+    FAMILIES,
+    N_EVAL_CANYONS,
+    PAPER,
+    CanyonId,
+    eval_canyon_ids,
+    eval_set,
+    split_family,
+)
 from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
 from depthq.sim.world import DEFAULT_DECISION_HZ, WorldConfig, world_for
 
@@ -101,8 +109,7 @@ def default_canyons(policy_spec: str) -> str:
     if not Path(policy_spec).is_dir():
         return "eval"
     env = dataset_record(read_config(Path(policy_spec))).env or {}
-    family = env.get("world", {}).get("family", PAPER)
-    return "eval" if family == PAPER else f"{family}/eval"
+    return eval_set(env.get("world", {}).get("family", PAPER))
 
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:

@@ -18,7 +18,7 @@ from typing import Any
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import parse_canyon_set
 from depthq.report.layout import NETS, model_name, setting_text
-from depthq.sim.canyon import FAMILIES, PAPER, split_family
+from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train.config import TrainConfig
 
@@ -134,7 +134,7 @@ def retarget(
         if family not in FAMILIES:
             raise ConfigError(f"--family {family!r}: unknown canyon family; one of {sorted(FAMILIES)}")
         changes["family"] = family
-        changes["canyons"] = "eval" if family == PAPER else f"{family}/eval"
+        changes["canyons"] = eval_set(family)
     if canyons is not None:
         changes["canyons"] = canyons
     if "canyons" in changes:

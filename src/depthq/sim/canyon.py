@@ -289,6 +289,11 @@ FAMILIES: dict[str, CanyonFamily] = {
 }
 
 
+def eval_set(family: str = PAPER) -> str:
+    """The name of a family's evaluation canyon set: 'eval' for the paper's, 'hard/eval', ..."""
+    return "eval" if family == PAPER else f"{family}/eval"
+
+
 def eval_canyon_ids(family: str = PAPER) -> list[CanyonId]:
     """A family's 20 fixed evaluation canyons, never used for training."""
     return [CanyonId("eval", i, family) for i in range(N_EVAL_CANYONS)]
