@@ -4,21 +4,76 @@ Depth-Q-Net: for each candidate action, the minimum predicted bin (bins predicte
 ignored: a ReLU output of 0 means "no prediction"); take the action whose closest obstacle is
 farthest. Coll-Q-Net: the action with the lowest collision probability. Ties go straight when
 straight is among the best, otherwise to the first tied candidate.
+
+A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead-selection) scores candidate action
+sequences (N, K), all in one head pass: each action held for K steps, and with `Selection.switch`
+also each that switches to another action after k steps. A sequence's score is the nearest bin of
+each step, combined over the steps by the rule: its minimum (`farthest_nearest_bin`, the default:
+at K = 1 the rule above) or its discounted mean (`discounted_nearest_bin`). The first action of the
+best sequence is executed; ties go to the first tied sequence that starts straight, else the first.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from depthq.errors import ConfigError
 
 ACTIONS = (-1.0, 0.0, 1.0)  # the candidate actions a Q-net policy scores per frame
 # Each kind's rule by name, as a checkpoint records it, and in words, as an exported graph carries it.
 RULE_OF = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_probability"}
 RULES = {
-    "farthest_nearest_bin": "for each action the nearest predicted bin (bins of exactly 0 ignored); the "
-    "action whose nearest bin is farthest; ties go straight if straight is tied, else to the first",
+    "farthest_nearest_bin": "for each candidate (an action, or a sequence of a lookahead Depth-Q-Net) "
+    "the nearest predicted bin (bins of exactly 0 ignored), its minimum over the predicted steps; the "
+    "candidate whose nearest bin is farthest, its first action; ties go straight if straight is tied, "
+    "else to the first",
+    "discounted_nearest_bin": "for each candidate sequence the nearest predicted bin of each step (bins of "
+    "exactly 0 ignored), their mean weighted by discount ** (step - 1); the candidate whose mean is "
+    "farthest, its first action; ties go straight if straight is tied, else to the first",
     "lowest_collision_probability": "the action with the lowest collision probability; ties go straight "
     "if straight is tied, else to the first",
 }
+DEPTH_RULES = ("farthest_nearest_bin", "discounted_nearest_bin")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """How a Depth-Q-Net policy makes and scores its candidates (a policy setting, not a training one).
+
+    `rule`: one of DEPTH_RULES; `discount`: the step weight's base of `discounted_nearest_bin`;
+    `switch`: also sequences that switch action once. Off by default: the policy re-plans every frame,
+    so holding is what it commits to, and OU exploration (a step-to-step correlation of 0.95) rarely
+    reverses within K frames, so switched sequences are predicted from few training examples.
+    """
+
+    rule: str = "farthest_nearest_bin"
+    discount: float = 0.9
+    switch: bool = False
+
+    def __post_init__(self) -> None:
+        if self.rule not in DEPTH_RULES:
+            raise ConfigError(f"selection rule must be one of {DEPTH_RULES}, got {self.rule!r}")
+        d = self.discount
+        if isinstance(d, bool) or not isinstance(d, int | float) or not 0 < d <= 1:
+            raise ConfigError(f"selection discount must be in (0, 1], got {d!r}")
+        if not isinstance(self.switch, bool):
+            raise ConfigError(f"selection switch must be true or false, got {self.switch!r}")
+
+
+def candidate_sequences(
+    actions: tuple[float, ...] | np.ndarray, lookahead: int, switch: bool = False
+) -> np.ndarray:
+    """(N, K) candidate sequences: each action held for K steps, in `actions`' order; with `switch`
+    then, for k = 1 … K−1 and each ordered pair of different actions, a for k steps and b after."""
+    actions = np.asarray(actions, np.float64)
+    held = np.repeat(actions[:, None], lookahead, axis=1)
+    if not switch:
+        return held
+    switched = [[a] * k + [b] * (lookahead - k)
+                for k in range(1, lookahead) for a in actions for b in actions if a != b]
+    return np.concatenate([held, np.asarray(switched, np.float64).reshape(-1, lookahead)])
 
 
 def depth_scores(pred_bins: np.ndarray) -> np.ndarray:
@@ -27,6 +82,24 @@ def depth_scores(pred_bins: np.ndarray) -> np.ndarray:
     masked = np.where(pred > 0, pred, np.inf)
     nearest = masked.min(axis=1)
     return np.where(np.isfinite(nearest), nearest, 0.0)
+
+
+def sequence_scores(pred_bins: np.ndarray, selection: Selection | None = None) -> np.ndarray:
+    """(N, K, n_bins) predicted depths of N candidate sequences (or (N, n_bins): one step) → (N,)
+    scores by `selection`'s rule (docs/design.md#lookahead-selection); at K = 1 `depth_scores`."""
+    selection = selection or Selection()
+    pred = np.asarray(pred_bins, dtype=np.float64)
+    nearest = depth_scores(pred.reshape(-1, pred.shape[-1])).reshape(pred.shape[0], -1)  # (N, K)
+    if selection.rule == "farthest_nearest_bin":
+        return nearest.min(axis=1)
+    weights = selection.discount ** np.arange(nearest.shape[1])
+    return (nearest * weights).sum(axis=1) / weights.sum()
+
+
+def first_actions(candidates: np.ndarray) -> np.ndarray:
+    """The action each candidate executes now: itself, or a sequence's (N, K) first."""
+    candidates = np.asarray(candidates, np.float64)
+    return candidates[:, 0] if candidates.ndim == 2 else candidates
 
 
 def pick_best(scores: np.ndarray, actions: np.ndarray, maximise: bool, tol: float = 1e-6) -> float:
@@ -38,16 +111,22 @@ def pick_best(scores: np.ndarray, actions: np.ndarray, maximise: bool, tol: floa
     return float(actions[straight[0] if straight else tied[0]])
 
 
-def select_depth_action(pred_bins: np.ndarray, actions: np.ndarray) -> float:
-    return pick_best(depth_scores(pred_bins), np.asarray(actions), maximise=True)
+def select_depth_action(
+    pred_bins: np.ndarray, actions: np.ndarray, selection: Selection | None = None
+) -> float:
+    """Candidates `actions` (N,) with bins (N, n_bins), or sequences (N, K) with bins (N, K, n_bins)."""
+    return pick_best(sequence_scores(pred_bins, selection), first_actions(actions), maximise=True)
 
 
 def select_coll_action(collision_prob: np.ndarray, actions: np.ndarray) -> float:
-    return pick_best(np.asarray(collision_prob), np.asarray(actions), maximise=False)
+    return pick_best(np.asarray(collision_prob), first_actions(actions), maximise=False)
 
 
-def select_action(kind: str, values: np.ndarray, actions: np.ndarray) -> float:
-    """The rule of a Q-net of `kind`: 'depth' (predicted bins per action) or 'coll' (probabilities)."""
+def select_action(
+    kind: str, values: np.ndarray, actions: np.ndarray, selection: Selection | None = None
+) -> float:
+    """The rule of a Q-net of `kind`: 'depth' (predicted bins per candidate, `selection`'s rule) or
+    'coll' (probabilities)."""
     if kind == "depth":
-        return select_depth_action(values, actions)
+        return select_depth_action(values, actions, selection)
     return select_coll_action(values, actions)

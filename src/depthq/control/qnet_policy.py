@@ -1,6 +1,7 @@
 """A policy extracted from a trained Depth-Q-Net or Coll-Q-Net: one trunk pass per frame, all
 candidate actions through the head in one batch, then the selection rule
-(docs/design.md#action-selection)."""
+(docs/design.md#action-selection). A lookahead Depth-Q-Net's candidates are action sequences
+(docs/design.md#lookahead-selection), scored in the same single head pass."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.control.action_selection import ACTIONS, select_action
+from depthq.configio import to_dict
+from depthq.control.action_selection import ACTIONS, Selection, candidate_sequences, select_action
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_stem
@@ -20,7 +22,8 @@ from depthq.nets.trunk import preprocess
 
 class QNetPolicy:
     """Greedy policy of a Q-net. `last_values` holds the latest per-action predictions (for Fig. 4):
-    (K, n_bins) depth bins for Depth-Q-Net, (K,) collision probabilities for Coll-Q-Net."""
+    (N, n_bins) depth bins for Depth-Q-Net (a lookahead one's: step t+1 of each action held), (N,)
+    collision probabilities for Coll-Q-Net. `selection`: how a Depth-Q-Net scores its candidates."""
 
     def __init__(
         self,
@@ -32,6 +35,7 @@ class QNetPolicy:
         source: str | None = None,
         device: torch.device | str = "cpu",
         weights: str | None = None,
+        selection: Selection | None = None,
     ) -> None:
         if kind not in ("depth", "coll"):
             raise ConfigError(f"unknown Q-net kind {kind!r}; expected 'depth' or 'coll'")
@@ -41,7 +45,12 @@ class QNetPolicy:
         self.net = net.to(self.device).eval()
         self.kind = kind
         self.actions = np.asarray(actions, np.float64)
-        self._actions_t = torch.tensor(actions, dtype=torch.float32, device=self.device)
+        self.selection = selection or Selection()
+        self.lookahead = net.head.config.lookahead
+        # The candidates scored per frame: the actions, or a lookahead net's sequences (N, K).
+        self.candidates = (self.actions if self.lookahead == 1
+                           else candidate_sequences(self.actions, self.lookahead, self.selection.switch))
+        self._actions_t = torch.tensor(self.candidates, dtype=torch.float32, device=self.device)
         self.input_size = input_size
         self.name = name
         self.source = source
@@ -55,9 +64,11 @@ class QNetPolicy:
         which: str | None = None,
         actions: tuple[float, ...] | None = None,
         device: torch.device | str = "cpu",
+        selection: Selection | None = None,
     ) -> QNetPolicy:
         """The policy of a checkpoint folder: `which` weights (None: the checkpoint's choice) and
-        `actions` (None: the checkpoint's) as in `depthq.nets.checkpoint`."""
+        `actions` (None: the checkpoint's) as in `depthq.nets.checkpoint`; `selection` (None: the
+        default rule) for a Depth-Q-Net."""
         net, config = load_qnet(Path(folder), which=which)
         kind = config["train"]["model"]
         return cls(
@@ -69,6 +80,7 @@ class QNetPolicy:
             source=str(folder),
             device=device,
             weights=weights_stem(selected(config, which)),
+            selection=selection,
         )
 
     def reset(self, seed: int | None = None) -> None:
@@ -76,13 +88,22 @@ class QNetPolicy:
 
     @torch.inference_mode()
     def values(self, image: np.ndarray) -> np.ndarray:
-        """Per-action predictions for one uint8 frame (H, W, 3)."""
+        """Per-candidate predictions for one uint8 frame (H, W, 3): (N, n_bins), (N, K, n_bins) or (N,)."""
         out = self.net.q_values(preprocess(image, self.input_size).to(self.device), self._actions_t)
         return (probability(out) if self.kind == "coll" else out).cpu().numpy()
 
+    def choose(self, values: np.ndarray) -> float:
+        """The action one frame's `values` select (every path that acts calls this)."""
+        return select_action(self.kind, values, self.candidates, self.selection)
+
+    def shown(self, values: np.ndarray) -> np.ndarray:
+        """What `last_values` keeps of one frame's `values`: per action, its prediction at t+1."""
+        return values if self.lookahead == 1 else values[: len(self.actions), 0]
+
     def act(self, obs: Observation) -> float:
-        self.last_values = self.values(obs["image"])
-        return select_action(self.kind, self.last_values, self.actions)
+        values = self.values(obs["image"])
+        self.last_values = self.shown(values)
+        return self.choose(values)
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -92,4 +113,7 @@ class QNetPolicy:
             "weights": self.weights,
             "actions": self.actions.tolist(),
             "input_size": self.input_size,
+            # A one-step net's description stays as it was; a lookahead net's says how it selects.
+            **({} if self.lookahead == 1
+               else {"lookahead": self.lookahead, "selection": to_dict(self.selection)}),
         }

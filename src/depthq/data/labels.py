@@ -9,6 +9,15 @@ d_{t+1} = bins[t + 1], and it drops those same last `horizon` samples.
 `action_lag` = 1 labels frame t with the command computed from frame t−1 (what the original
 recorder most likely stored: recorder and controller were separate processes); frame 0 then has
 no label and is not a sample.
+
+A Depth-Q-Net that looks `lookahead` = K steps ahead (docs/design.md#lookahead) keeps the one-step
+net's samples and extends each target to the frames t+1 … t+K, with the K commands actually sent
+(off-policy) as its actions. A step is valid when its frame is one a one-step sample may target:
+not past the run's last frame, and not among the frames a collision run's dropped samples would
+have targeted. So step 1 is always valid, nothing is dropped, K = 1 is the one-step net, and a
+sample near a run's end keeps the steps it has: the rest are masked, not padded, because after a
+bump or the time limit there is no frame to learn from, and a made-up one (the last frame held, a
+wall at 0 m) would teach depths that were never measured.
 """
 
 from __future__ import annotations
@@ -52,3 +61,24 @@ def depth_sample_indices(
     """Depth-Q-Net's samples t (target bins[t + 1]), without the last `horizon` of a collision run."""
     t = coll_sample_indices(n_frames, action_lag)
     return t[t < n_frames - 1 - horizon] if ended_in_collision else t
+
+
+def depth_lookahead_frames(
+    n_frames: int, ended_in_collision: bool, lookahead: int = 1, horizon: int = HORIZON, action_lag: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depth-Q-Net's samples t (S,), the frames of their targets t+1 … t+K (S, K) and which steps
+    are valid (S, K). A masked step's frame is clamped to the last valid one (a real frame, never a
+    target: the mask says so)."""
+    t = depth_sample_indices(n_frames, ended_in_collision, horizon, action_lag)
+    last = n_frames - 1 - horizon if ended_in_collision else n_frames - 1
+    frames = t[:, None] + np.arange(1, lookahead + 1)
+    return t, np.minimum(frames, last), frames <= last
+
+
+def lookahead_action_indices(
+    t: np.ndarray, n_frames: int, lookahead: int = 1, action_lag: int = 0
+) -> np.ndarray:
+    """(S, K) indices of the stored commands that are the K actions of samples t: step k's is the
+    command sent after frame t + k − 1 (t + k − 1 − action_lag). Past the run's last command
+    (index N − 2) it is held: only masked steps reach there, and their action still enters the head."""
+    return np.minimum(t[:, None] - action_lag + np.arange(lookahead), n_frames - 2)

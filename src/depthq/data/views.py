@@ -5,6 +5,9 @@ A view is the sample list of one split (or nested subset) for one network:
     kind "depth"  (image_t, a_t, bins[t + 1])   Depth-Q-Net; collision runs lose their last H samples
     kind "coll"   (image_t, a_t, y_t)           Coll-Q-Net; every frame with an action
 
+A Depth-Q-Net view with `lookahead` K > 1 has the same samples, each with K actions and K targets
+(a_t … a_{t+K−1}, bins[t + 1] … bins[t + K]) and a mask of the valid steps (`depthq.data.labels`).
+
 `view_arrays` gives everything but the images as NumPy arrays, samples ordered by run then frame,
 with `run_offsets` so that "a random run, then a random frame of it" (docs/design.md#sampling) can be drawn on
 precomputed trunk features as well (`run_then_frame`). `DepthView`/`CollView` add the images,
@@ -27,8 +30,10 @@ from depthq.data import DataConfig
 from depthq.data.labels import (
     coll_sample_indices,
     collision_labels,
+    depth_lookahead_frames,
     depth_sample_indices,
     labelled_collision,
+    lookahead_action_indices,
 )
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.runfile import RunReader
@@ -39,7 +44,12 @@ KINDS = ("depth", "coll")
 
 
 def view_arrays(
-    dataset: Dataset, split: str, n_runs: int | None, kind: str, config: DataConfig | None = None
+    dataset: Dataset,
+    split: str,
+    n_runs: int | None,
+    kind: str,
+    config: DataConfig | None = None,
+    lookahead: int = 1,
 ) -> dict[str, np.ndarray]:
     """All samples of a view, run by run.
 
@@ -47,25 +57,42 @@ def view_arrays(
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
     `frame_id` (t), `action` (a_t: the stored command of frame t − action_lag, clipped to
     ±action_clip), and `target`: bins[t + 1] (S, 26) for "depth", y_t (S,) for "coll".
+
+    "depth" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
+    clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
+    step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.labels`).
     """
     if kind not in KINDS:
         raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
+    if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
+        raise ConfigError(f"view lookahead must be an integer >= 1, got {lookahead!r}")
+    if kind == "coll" and lookahead != 1:
+        raise ConfigError(f"a Coll-Q-Net view looks one step ahead (its label has its own horizon), "
+                          f"got lookahead {lookahead}")
     config = config or DataConfig()
     runs = select_runs(dataset, split, n_runs, config.min_frames)
     if not runs:
         raise ConfigError(f"{dataset.root} has no usable {split} runs (at least {config.min_frames} frames)")
-    frame_ids, actions, targets = [], [], []
+    frame_ids, actions, targets, masks = [], [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
         ended = labelled_collision(entry, config.every_run_end)
-        if kind == "depth":
+        if kind == "depth" and lookahead > 1:
+            t, frames, mask = depth_lookahead_frames(
+                run.n_frames, ended, lookahead, config.horizon, config.action_lag
+            )
+            target = np.where(mask[:, :, None], run.bins[frames], np.float32(np.nan))
+            commands = run.actions[lookahead_action_indices(t, run.n_frames, lookahead, config.action_lag)]
+            masks.append(mask)
+        elif kind == "depth":
             t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
-            target = run.bins[t + 1]
+            target, commands = run.bins[t + 1], run.actions[t - config.action_lag]
         else:
             t = coll_sample_indices(run.n_frames, config.action_lag)
             target = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
+            commands = run.actions[t - config.action_lag]
         frame_ids.append(t)
-        actions.append(np.clip(run.actions[t - config.action_lag], -config.action_clip, config.action_clip))
+        actions.append(np.clip(commands, -config.action_clip, config.action_clip))
         targets.append(target)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
     run_index = np.array([entry.index for entry in runs], dtype=np.int64)
@@ -76,6 +103,7 @@ def view_arrays(
         "frame_id": np.concatenate(frame_ids),
         "action": np.concatenate(actions),
         "target": np.concatenate(targets),
+        **({"mask": np.concatenate(masks)} if masks else {}),
     }
 
 
@@ -106,7 +134,8 @@ class RunThenFrameSampler(Sampler[int]):
 
 
 class FrameView(TorchDataset):
-    """Map-style dataset of one view: item i is (image uint8 (H, W, 3), action float32, target float32)."""
+    """Map-style dataset of one view: item i is (image uint8 (H, W, 3), action, target), float32
+    (a Depth-Q-Net's with `lookahead` K > 1: actions (K,), targets (K, 26))."""
 
     kind: str
 
@@ -117,9 +146,10 @@ class FrameView(TorchDataset):
         n_runs: int | None = None,
         config: DataConfig | None = None,
         max_open_files: int = 64,
+        lookahead: int = 1,
     ) -> None:
         self.dataset = dataset
-        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config)
+        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config, lookahead)
         self._entries: dict[int, RunEntry] = {entry.index: entry for entry in dataset.entries(split)}
         self._max_open = max_open_files
         self._readers: OrderedDict[int, RunReader] = OrderedDict()
@@ -128,7 +158,7 @@ class FrameView(TorchDataset):
     def __len__(self) -> int:
         return len(self.arrays["frame_id"])
 
-    def __getitem__(self, i: int) -> tuple[np.ndarray, np.float32, np.ndarray]:
+    def __getitem__(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         run_id = int(self.arrays["run_id"][i])
         image = self._reader(run_id).image(int(self.arrays["frame_id"][i]))
         return image, self.arrays["action"][i], self.arrays["target"][i]

@@ -1,8 +1,9 @@
 """`depthq export`: a trained Q-net as one ONNX graph, camera frame in, per-action values out.
 
 The graph takes a uint8 camera frame (H, W, 3) of the size it was exported for (by default the
-checkpoint's: its training data's frames) and the candidate actions (K,) float32; it returns the predicted
-depth bins (K, n_bins) in metres (Depth-Q-Net) or the collision probabilities (K,) (Coll-Q-Net).
+checkpoint's: its training data's frames) and the N candidate actions (N,) float32; it returns the predicted
+depth bins (N, n_bins) in metres (Depth-Q-Net) or the collision probabilities (N,) (Coll-Q-Net). A
+Depth-Q-Net that looks K steps ahead takes candidate sequences (N, K) and returns (N, K, n_bins).
 Resizing and scaling to [0, 1] are inside the graph, so a robot needs nothing but onnxruntime and
 numpy. The resize is `depthq.nets.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
 frames with Pillow's fixed-point algorithm (integer weights, a horizontal then a vertical pass,
@@ -14,6 +15,7 @@ The model's metadata (`metadata_props`) carries what acting needs:
 
     depthq.kind        "depth" or "coll"
     depthq.actions     the candidate actions, JSON, e.g. [-1.0, 0.0, 1.0]
+    depthq.lookahead   K, the steps a Depth-Q-Net predicts (1: one step; Coll-Q-Net: 1)
     depthq.selection   the rule that turns the outputs into one action (`depthq.control.action_selection`)
     depthq.input_size  the side the frame is resized to
     depthq.frame_size  the frame the graph takes, JSON [height, width]
@@ -33,7 +35,7 @@ from torch import nn
 
 from depthq import __version__
 from depthq.configio import atomic_write_bytes
-from depthq.control.action_selection import RULES
+from depthq.control.action_selection import RULES, candidate_sequences
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet, policy_record
 from depthq.nets.heads import QNet
@@ -81,7 +83,8 @@ class FrameResize(nn.Module):
 
 
 class FramePolicyGraph(nn.Module):
-    """What the ONNX graph computes: (frame uint8 (H, W, 3), actions (K,)) → per-action values."""
+    """What the ONNX graph computes: (frame uint8 (H, W, 3), actions (N,) or sequences (N, K)) →
+    per-candidate values."""
 
     def __init__(self, net: QNet, kind: str, input_size: int, frame_size: tuple[int, int]) -> None:
         super().__init__()
@@ -126,7 +129,9 @@ def export_onnx(
         raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
     graph = FramePolicyGraph(net, kind, input_size, frame_size).eval()
     frame = torch.zeros(*frame_size, 3, dtype=torch.uint8)
-    candidates = torch.tensor(actions, dtype=torch.float32)
+    lookahead = net.head.config.lookahead
+    held = candidate_sequences(actions, lookahead)  # an example input: any N candidates run
+    candidates = torch.tensor(held[:, 0] if lookahead == 1 else held, dtype=torch.float32)
     with torch.inference_mode(False), torch.no_grad():
         program = torch.onnx.export(
             graph,
@@ -144,6 +149,7 @@ def export_onnx(
     metadata = {
         "depthq.kind": kind,
         "depthq.actions": json.dumps([float(a) for a in actions]),
+        "depthq.lookahead": str(lookahead),
         "depthq.selection": RULES[policy.selection],
         "depthq.input_size": str(input_size),
         "depthq.frame_size": json.dumps(list(frame_size)),

@@ -1,6 +1,10 @@
 """Table I's offline columns: a checkpoint's loss on every validation sample of its dataset —
 the training loss: absolute difference on the near bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net).
 
+A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead) is measured on its first step,
+t+1, with the one-step loss: the quantity a one-step net's column holds, so a sweep over lookaheads
+compares like with like; `steps` adds each step's, over the samples where that step is valid.
+
 The dataset is the one the checkpoint records: where it was (an absolute path), or a folder given
 instead, which must hold the same runs (its fingerprint). A checkpoint travels without its data:
 when the dataset is not found, the metric is skipped with one line saying so.
@@ -9,6 +13,7 @@ when the dataset is not found, the metric is skipped with one line saying so.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +41,8 @@ def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None)
     train = config["train"]
     kind = train["model"]
     train_config = from_dict(TrainConfig, train)
-    arrays = view_arrays(dataset, "val", None, kind=kind, config=train_config.labels())
+    lookahead = train_config.lookahead
+    arrays = view_arrays(dataset, "val", None, kind=kind, config=train_config.labels(), lookahead=lookahead)
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
     targets = torch.from_numpy(np.asarray(arrays["target"], np.float32))
     size = int(train["input_size"])
@@ -45,9 +51,15 @@ def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None)
     else:  # the trunk was trained with the head: run it on the frames themselves
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
-    loss, _ = loss_function(train_config)(outputs, targets)
     weights = weights_stem(selected(config, which))
-    return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": weights}
+    if lookahead == 1:
+        loss, _ = loss_function(train_config)(outputs, targets)
+        return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": weights}
+    one_step = loss_function(replace(train_config, lookahead=1))
+    valid = torch.from_numpy(arrays["mask"])
+    steps = [float(one_step(outputs[valid[:, k], k], targets[valid[:, k], k])[0]) for k in range(lookahead)]
+    return {"metric": METRICS[kind], "value": steps[0], "samples": len(targets), "weights": weights,
+            "steps": steps}
 
 
 def training_data(record: dict[str, Any], data: Path | None) -> Dataset | None:

@@ -10,7 +10,8 @@ config.json (format version 3):
     format, format_version   "depthq-checkpoint", 3
     provenance               the package and version that wrote it
     train                    the full TrainConfig (`select`: the weights a policy uses by default;
-                             `snapshots`: epochs whose weights are kept as well)
+                             `snapshots`: epochs whose weights are kept as well; `lookahead`: the
+                             steps a Depth-Q-Net predicts, also in `head`)
     head, trunk, trunk_frozen, input_size, learning_rate
                              the network, rebuilt from these
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
@@ -27,7 +28,8 @@ truncated or malformed file fails as well. Files written before the digest was r
 load, with a warning that they cannot be verified.
 
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
-layout before `dataset` and `policy`). A newer version is refused by name.
+layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
+Depth-Q-Net (lookahead 1). A newer version is refused by name.
 """
 
 from __future__ import annotations
@@ -66,6 +68,9 @@ _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, t
 # its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
 _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
+# TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
+# there was (a one-step Depth-Q-Net), so such a folder still loads and resumes.
+_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0}
 
 
 @dataclass(frozen=True)
@@ -202,7 +207,8 @@ def read_config(folder: Path) -> dict[str, Any]:
             f"{path}: checkpoint format version {version!r}, but this depthq reads versions 1 to "
             f"{FORMAT_VERSION}; it was written by a newer depthq: upgrade depthq to read it"
         )
-    return record if version == FORMAT_VERSION else _upgrade(record)
+    record = record if version == FORMAT_VERSION else _upgrade(record)
+    return {**record, "train": {**_ADDED_TRAIN, **record.get("train", {})}}
 
 
 def _upgrade(record: dict[str, Any]) -> dict[str, Any]:

@@ -4,6 +4,10 @@ Both heads see (feature, action): dropout 0.5 on the feature, the raw action sca
 FC 4096 + ReLU. Depth-Q-Net ends in FC 26 + ReLU (the depth bins one step later, in metres);
 Coll-Q-Net in FC 25 + ReLU → FC 1, returned as a logit so that training can use the numerically
 stable BCE-with-logits; `probability` turns logits into P(collision within H).
+
+A Depth-Q-Net head that looks `lookahead` = K steps ahead (docs/design.md#lookahead) appends the K
+actions of a sequence and ends in FC K·26: the bins at t+1 … t+K, (B, K, 26). K = 1 is the one-step
+head, with the same parameters, initialisation and (B, 26) output.
 """
 
 from __future__ import annotations
@@ -37,11 +41,12 @@ class HeadConfig:
     n_bins: int = 26
     dropout: float = 0.5
     action_scale: float = 1.0  # the action enters the hidden layer as action_scale · a
+    lookahead: int = 1  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
 
     def __post_init__(self) -> None:
         if self.kind not in HEAD_KINDS:
             raise ConfigError(f"HeadConfig.kind must be one of {HEAD_KINDS}, got {self.kind!r}")
-        for name in ("feature_dim", "hidden", "n_bins"):
+        for name in ("feature_dim", "hidden", "n_bins", "lookahead"):
             value = getattr(self, name)
             if not _positive_int(value):
                 raise ConfigError(f"HeadConfig.{name} must be a positive integer, got {value!r}")
@@ -50,16 +55,20 @@ class HeadConfig:
             raise ConfigError(f"HeadConfig.dropout must be in [0, 1), got {self.dropout!r}")
         if not self.action_scale > 0:
             raise ConfigError(f"HeadConfig.action_scale must be > 0, got {self.action_scale!r}")
+        if self.kind == "coll" and self.lookahead != 1:
+            raise ConfigError(
+                f"HeadConfig.lookahead: a Coll-Q-Net head takes one action, got {self.lookahead!r}"
+            )
 
 
 class Head(nn.Module):
-    """The part both heads share: dropout(feature) ⊕ action → FC hidden + ReLU."""
+    """The part both heads share: dropout(feature) ⊕ action(s) → FC hidden + ReLU."""
 
     def __init__(self, config: HeadConfig, output: nn.Module) -> None:
         super().__init__()
         self.config = config
         self.dropout = nn.Dropout(config.dropout)
-        self.hidden = nn.Linear(config.feature_dim + 1, config.hidden)
+        self.hidden = nn.Linear(config.feature_dim + config.lookahead, config.hidden)
         self.output = output
         for module in self.modules():
             if isinstance(module, nn.Linear):  # Glorot init, as in the paper's TensorFlow code
@@ -67,25 +76,31 @@ class Head(nn.Module):
                 nn.init.zeros_(module.bias)
 
     def hidden_features(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        """(B, D), (B,) or (B, 1) → (B, hidden)."""
+        """(B, D), actions (B,) or (B, 1) (lookahead K > 1: sequences (B, K)) → (B, hidden)."""
         if feature.ndim != 2 or feature.shape[1] != self.config.feature_dim:
             raise ConfigError(
                 f"head: expected features (B, {self.config.feature_dim}), got {tuple(feature.shape)}"
             )
-        action = action.reshape(-1, 1).to(feature.dtype) * self.config.action_scale
+        k = self.config.lookahead
+        if k > 1 and (action.ndim != 2 or action.shape[1] != k):
+            raise ConfigError(f"head: expected action sequences (B, {k}), got {tuple(action.shape)}")
+        action = action.reshape(-1, k).to(feature.dtype) * self.config.action_scale
         if action.shape[0] != feature.shape[0]:
             raise ConfigError(f"head: {feature.shape[0]} features but {action.shape[0]} actions")
         return F.relu(self.hidden(torch.cat([self.dropout(feature), action], dim=1)))
 
 
 class DepthHead(Head):
-    """Depth-Q-Net head: predicted depth bins at t+1, (B, n_bins), ≥ 0."""
+    """Depth-Q-Net head: predicted depth bins at t+1, (B, n_bins), ≥ 0; with lookahead K > 1 at
+    t+1 … t+K, (B, K, n_bins)."""
 
     def __init__(self, config: HeadConfig) -> None:
-        super().__init__(config, nn.Linear(config.hidden, config.n_bins))
+        super().__init__(config, nn.Linear(config.hidden, config.lookahead * config.n_bins))
 
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        return F.relu(self.output(self.hidden_features(feature, action)))
+        bins = F.relu(self.output(self.hidden_features(feature, action)))
+        k = self.config.lookahead
+        return bins if k == 1 else bins.reshape(-1, k, self.config.n_bins)
 
 
 class CollHead(Head):
@@ -129,13 +144,16 @@ class QNet(nn.Module):
 
     @torch.no_grad()
     def q_values(self, frame: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """One frame, K candidate actions → (K, n_bins) depth bins or (K,) collision logits.
+        """One frame, N candidate actions → (N, n_bins) depth bins or (N,) collision logits; with
+        lookahead K > 1, N candidate sequences (N, K) → (N, K, n_bins).
 
         `frame` is an image (1, 3, H, W) in [0, 1] or its feature (1, D) / (D,). The trunk runs once;
-        the head runs on all K actions in one batch. Call `.eval()` first: dropout would make acting random.
+        the head runs on all N candidates in one batch. Call `.eval()` first: dropout would make
+        acting random.
         """
         feature = self.trunk(frame) if frame.ndim == 4 else frame.reshape(1, -1)
         if feature.shape[0] != 1:
             raise ConfigError(f"q_values: expected one frame, got a batch of {feature.shape[0]}")
-        actions = actions.reshape(-1)
+        k = self.head.config.lookahead
+        actions = actions.reshape(-1) if k == 1 else actions.reshape(-1, k)
         return self.head(feature.expand(actions.shape[0], -1), actions)

@@ -51,6 +51,48 @@ def depth_l1_loss(
     return errors.sum() / counts.sum().clamp(min=1), per_sample
 
 
+def lookahead_l1_loss(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    step_weights: torch.Tensor,
+    clip: float = DEPTH_CLIP,
+    reduction: str = "original",
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """`depth_l1_loss` over K steps (docs/design.md#lookahead): pred and target (B, K, bins), step k
+    weighted by `step_weights[k]` (K,) → (batch loss, per-sample loss (B,)).
+
+    A masked step (past a run's end) has NaN in every target bin, so none of its bins is valid and
+    it adds nothing. The weights are normalised over all K steps, not over a sample's valid ones:
+    every valid (sample, step) weighs the same wherever it is, as every bin counts in "original"'s
+    mean over 26 bins whether valid or not; a sample near a run's end is not worth more per step.
+
+    "original": per sample, the weighted mean over steps of each step's "original" loss; the batch
+    loss is the mean of the samples'. "valid_mean": the weighted sum of absolute errors over all
+    valid bins of the batch divided by their weighted count (a sample's own: over its valid bins).
+    With K = 1 and weight 1 both equal `depth_l1_loss`.
+    """
+    if pred.ndim != 3 or pred.shape != target.shape:
+        raise ConfigError(
+            f"lookahead_l1_loss: pred {tuple(pred.shape)} and target {tuple(target.shape)} must both be "
+            "(B, steps, bins)"
+        )
+    if step_weights.shape != pred.shape[1:2]:
+        raise ConfigError(f"lookahead_l1_loss: {pred.shape[1]} steps but weights {tuple(step_weights.shape)}")
+    if reduction not in DEPTH_LOSSES:
+        raise ConfigError(f"depth loss must be one of {DEPTH_LOSSES}, got {reduction!r}")
+    weights = step_weights.to(pred)  # its dtype and device
+    if reduction == "original":
+        _, per_step = depth_l1_loss(pred.flatten(0, 1), target.flatten(0, 1), clip, reduction)
+        per_sample = (per_step.view(pred.shape[:2]) * weights).sum(dim=1) / weights.sum()
+        return per_sample.mean(), per_sample
+    valid = depth_valid_mask(target, clip)
+    errors = torch.where(valid, (pred - torch.where(valid, target, 0.0)).abs(), 0.0)
+    sums = (errors.sum(dim=2) * weights).sum(dim=1)  # (B,)
+    counts = (valid.sum(dim=2).to(pred.dtype) * weights).sum(dim=1)
+    tiny = torch.finfo(pred.dtype).tiny  # no valid bin: a sum of 0 over a count of 0 gives 0, with a graph
+    return sums.sum() / counts.sum().clamp(min=tiny), sums / counts.clamp(min=tiny)
+
+
 def coll_bce_loss(logits: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Binary cross-entropy on logits (stable for any logit) → (mean, per-sample (B,))."""
     if logits.ndim != 1 or logits.shape != target.shape:

@@ -94,7 +94,8 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
         time_limit_s=sweep.time_limit_s,
         decision_hz=sweep.decision_hz,
     )
-    models = sweep.models()
+    # A model in several variants (a Coll-Q-Net in a lookahead sweep, `DEPTH_ONLY`) runs once.
+    models = list({m.name: m for m in sweep.models()}.values())
     configs = {m: sweep.train_config(m, str(data)) for m in models}
     frozen = sorted({(c.trunk, c.input_size) for c in configs.values() if TRUNKS[c.trunk].frozen})
     stages = [

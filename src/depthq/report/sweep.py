@@ -25,6 +25,10 @@ from depthq.train.config import TrainConfig
 Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field, value) pairs; () is the preset's own setting
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
+# Settings only Depth-Q-Net has (`TrainConfig.lookahead`): a Coll-Q-Net in a variant that sets them
+# is the variant without them, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
+# variant's row shows it).
+DEPTH_ONLY = ("lookahead", "lookahead_discount")
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 
@@ -43,6 +47,11 @@ class Model:
     @property
     def name(self) -> str:
         return model_name(self.net, self.runs, self.seed, self.differs)
+
+    @property
+    def settings(self) -> Variant:
+        """The settings of `variant` its network has (`DEPTH_ONLY`)."""
+        return tuple((k, v) for k, v in self.variant if self.net == "depth" or k not in DEPTH_ONLY)
 
 
 @dataclass(frozen=True)
@@ -92,13 +101,15 @@ class Sweep:
     def models(self) -> list[Model]:
         """Seed-major: an interrupted sweep already holds a whole table for its first seed."""
         own = self.train_config(Model(self.nets[0], self.subsets[0], self.seeds[0]), "data")
-        return [
-            Model(net, n, seed, variant, tuple((k, v) for k, v in variant if getattr(own, k) != v))
+        models = [
+            Model(net, n, seed, variant)
             for seed in self.seeds
             for variant in self.variants()
             for n in self.subsets
             for net in self.nets
         ]
+        return [replace(m, differs=tuple((k, v) for k, v in m.settings if getattr(own, k) != v))
+                for m in models]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
         budget = {} if self.epochs is None else {"epochs": self.epochs}
@@ -109,7 +120,7 @@ class Sweep:
             seed=model.seed,
             train_batches=self.train_batches,
             val_batches=self.val_batches,
-            **(budget | dict(model.variant)),
+            **(budget | dict(model.settings)),
         )
 
     def setup(self) -> dict[str, Any]:

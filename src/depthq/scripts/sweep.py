@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     widened = bool(changes) or target != base
     sweep = replace(target, name=f"{base.name} sweep" if widened else base.name, **changes)
     times = run_sweep(sweep, args.out, device=args.device, executor=executor_from(args))
-    models = len(sweep.models())
+    models = len({m.name for m in sweep.models()})
     print(f"{sweep.name}: {models} models, {sum(times.values()) / 60:.1f} min of stage time in all; "
           f"tables and report in {args.out}")
     return 0

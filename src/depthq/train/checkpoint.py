@@ -72,7 +72,8 @@ class TrainState:
 
 def head_config(config: TrainConfig) -> HeadConfig:
     feature_dim = TRUNKS[config.trunk].feature_dim
-    return HeadConfig(config.model, feature_dim, dropout=config.dropout, action_scale=config.action_scale)
+    return HeadConfig(config.model, feature_dim, dropout=config.dropout, action_scale=config.action_scale,
+                      lookahead=config.lookahead)
 
 
 def build_qnet(config: TrainConfig) -> QNet:

@@ -72,6 +72,14 @@ class TrainConfig:
     action_scale: float = 10.0  # `HeadConfig.action_scale`
     input_size: int = INPUT_SIZE
     depth_loss: str = "original"  # `depthq.nets.losses.depth_l1_loss`
+    # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
+    # the K actions taken; 1 is the paper's one-step net. Not `horizon`, which is Coll-Q-Net's
+    # collision-label window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
+    # separate settings (a lookahead of 3 with the original's labels keeps horizon 5). Coll-Q-Net: 1.
+    lookahead: int = 1
+    # Weight of lookahead step k in the loss: lookahead_discount ** (k − 1). 1 weighs every step alike
+    # (each is a measured frame, and the selection rule's minimum over the steps needs them all).
+    lookahead_discount: float = 1.0
     # Labels (`depthq.data.labels`); the defaults are the original's.
     horizon: int = HORIZON
     min_frames: int = MIN_FRAMES
@@ -96,6 +104,15 @@ class TrainConfig:
         _int_at_least("seed", self.seed, 0)
         for name in ("epochs", "train_batches", "val_batches", "batch_size", "input_size"):
             _int_at_least(name, getattr(self, name), 1)
+        _int_at_least("lookahead", self.lookahead, 1)
+        if self.model == "coll" and self.lookahead != 1:
+            raise ConfigError(
+                f"train.lookahead is Depth-Q-Net's; Coll-Q-Net looks ahead through its label (horizon), "
+                f"so its lookahead must be 1, got {self.lookahead!r}"
+            )
+        discount = self.lookahead_discount
+        if isinstance(discount, bool) or not isinstance(discount, int | float) or not 0 < discount <= 1:
+            raise ConfigError(f"train.lookahead_discount must be in (0, 1], got {discount!r}")
         _int_at_least("horizon", self.horizon, 1)
         _int_at_least("min_frames", self.min_frames, self.horizon + 2)
         _int_at_least("action_lag", self.action_lag, 0)
@@ -137,6 +154,10 @@ class TrainConfig:
             action_clip=self.action_clip,
             action_lag=self.action_lag,
         )
+
+    def step_weights(self) -> tuple[float, ...]:
+        """The loss weight of each lookahead step, t+1 first."""
+        return tuple(float(self.lookahead_discount) ** k for k in range(self.lookahead))
 
     @property
     def learning_rate(self) -> float:

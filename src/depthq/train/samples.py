@@ -25,7 +25,8 @@ from depthq.train.features import FeatureTable
 
 @dataclass(frozen=True)
 class Batch:
-    """Model inputs (features (B, D) or images (B, 3, S, S)), actions (B,), targets (B, bins) or (B,)."""
+    """Model inputs (features (B, D) or images (B, 3, S, S)), actions (B,), targets (B, bins) or (B,);
+    a lookahead Depth-Q-Net's: actions (B, K), targets (B, K, bins) (NaN on masked steps)."""
 
     inputs: torch.Tensor
     actions: torch.Tensor

@@ -22,7 +22,7 @@ from depthq.data.views import CollView, DepthView, view_arrays
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.heads import QNet
-from depthq.nets.losses import coll_bce_loss, depth_l1_loss
+from depthq.nets.losses import coll_bce_loss, depth_l1_loss, lookahead_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.parallel import cores
@@ -116,8 +116,12 @@ def train(
 
 
 def loss_function(config: TrainConfig) -> LossFn:
+    """The training loss of `config`'s network: a lookahead Depth-Q-Net's weights its steps."""
     if config.model == "coll":
         return coll_bce_loss
+    if config.lookahead > 1:
+        weights = torch.tensor(config.step_weights())
+        return functools.partial(lookahead_l1_loss, step_weights=weights, reduction=config.depth_loss)
     return functools.partial(depth_l1_loss, reduction=config.depth_loss)
 
 
@@ -138,17 +142,17 @@ def _samples(
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
     data = config.labels()
     if TRUNKS[config.trunk].frozen:
-        arrays = {split: view_arrays(dataset, split, n, config.model, data)
+        arrays = {split: view_arrays(dataset, split, n, config.model, data, config.lookahead)
                   for split, n in (("train", config.runs), ("val", None))}
         _check_labels(config, arrays["train"]["target"])
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
         return FeatureSamples(arrays["train"], table, "train"), FeatureSamples(arrays["val"], table, "val")
     view = DepthView if config.model == "depth" else CollView
-    train_view = view(dataset, "train", config.runs, data)
+    train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead)
     _check_labels(config, train_view.arrays["target"])
     if progress:
         tqdm.write(f"trunk {config.trunk!r} is trained with the head, on images")
-    val_view = view(dataset, "val", None, data)
+    val_view = view(dataset, "val", None, data, lookahead=config.lookahead)
     return (ImageSamples(train_view, config.input_size, progress),
             ImageSamples(val_view, config.input_size, progress))
 
