@@ -6,6 +6,7 @@ Table I's imitation loss compares every policy's actions with this expert's on t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,6 +46,10 @@ class DepthHeuristic:
 
     def act(self, obs: Observation) -> float:
         return heuristic_action(obs["scan"], self._sectors, self._actions, self.config.clip)
+
+    def act_batch(self, observations: Sequence[Observation]) -> list[float]:
+        """`act` on each observation (`BatchPolicy`): the rule is a few comparisons per scan."""
+        return [self.act(obs) for obs in observations]
 
     def describe(self) -> dict[str, Any]:
         return {"policy": self.name, "config": to_dict(self.config)}

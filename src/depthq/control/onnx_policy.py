@@ -9,6 +9,7 @@ in the metadata (a file without it looks one step ahead).
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +57,7 @@ class OnnxPolicy:
         self.path = path
         self.name = f"ONNX:{path.stem}"
         self.last_values: np.ndarray | None = None
+        self.last_batch_values: list[np.ndarray] | None = None
 
     def reset(self, seed: int | None = None) -> None:
         """Stateless between frames."""
@@ -82,6 +84,13 @@ class OnnxPolicy:
         values = self.values(obs["image"])
         self.last_values = self.shown(values)
         return self.choose(values)
+
+    def act_batch(self, observations: Sequence[Observation]) -> list[float]:
+        """`act` on each observation (`BatchPolicy`), one graph run per frame: the graph takes one
+        frame, as on the robot; `last_batch_values` holds what `last_values` would hold for each."""
+        values = [self.values(obs["image"]) for obs in observations]
+        self.last_batch_values = [self.shown(v) for v in values]
+        return [self.choose(v) for v in values]
 
     def describe(self) -> dict[str, Any]:
         actions = self.actions.tolist()

@@ -35,7 +35,8 @@ class OUConfig:
 
 
 class OUPolicy:
-    """Ignores the observation; the noise state restarts at 0 with every run (`reset`)."""
+    """Ignores the observation; the noise state restarts at 0 with every run (`reset`). Per-run state,
+    hence no `act_batch`: lock-step evaluation gives each run an instance of its own."""
 
     name = "ou"
 

@@ -1,7 +1,9 @@
-"""The one interface every controller shares: observation in, yaw rate out."""
+"""The one interface every controller shares: observation in, yaw rate out; and the batch interface
+of the policies that decide for several runs in one call (lock-step evaluation)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -28,3 +30,17 @@ class Policy(Protocol):
     def describe(self) -> dict[str, Any]:
         """JSON-ready description stored with every result the policy produced."""
         ...
+
+
+@runtime_checkable
+class BatchPolicy(Policy, Protocol):
+    """A policy without per-run state that decides for several runs at once (docs/design.md#lockstep).
+
+    `act_batch(observations)[i]` is `act(observations[i])` to the bit, whatever the other
+    observations, in an evaluation's workers (one torch thread each: with more, torch splits a
+    batch's sums otherwise than one frame's): which runs share a call must not change a run. A policy
+    with per-run state (OU noise) does not offer it; lock-step evaluation gives each of its runs an
+    instance of its own.
+    """
+
+    def act_batch(self, observations: Sequence[Observation]) -> list[float]: ...

@@ -5,6 +5,7 @@ candidate actions through the head in one batch, then the selection rule
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,12 @@ from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_stem
 from depthq.nets.heads import QNet, probability
 from depthq.nets.trunk import preprocess
+
+# Frames per trunk call in `act_batch`, whose values must be one-frame calls' to the bit (`BatchPolicy`,
+# docs/design.md#lockstep). On the reference CPU (torch 2.13, one thread) the trunk gives every frame
+# batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel); the head
+# differs from 4 rows on (another sgemm kernel), so it runs per frame, on that frame's candidates.
+BATCH_FRAMES = 8
 
 
 class QNetPolicy:
@@ -56,6 +63,7 @@ class QNetPolicy:
         self.source = source
         self.weights = weights
         self.last_values: np.ndarray | None = None
+        self.last_batch_values: list[np.ndarray] | None = None
 
     @classmethod
     def from_checkpoint(
@@ -89,7 +97,19 @@ class QNetPolicy:
     @torch.inference_mode()
     def values(self, image: np.ndarray) -> np.ndarray:
         """Per-candidate predictions for one uint8 frame (H, W, 3): (N, n_bins), (N, K, n_bins) or (N,)."""
-        out = self.net.q_values(preprocess(image, self.input_size).to(self.device), self._actions_t)
+        return self.candidate_values(self.features([image])[0])
+
+    @torch.inference_mode()
+    def features(self, images: Sequence[np.ndarray]) -> torch.Tensor:
+        """The trunk's features (F, D) of F uint8 frames, at most BATCH_FRAMES per trunk call."""
+        frames = preprocess(np.stack(images), self.input_size).to(self.device)
+        calls = -(-len(images) // BATCH_FRAMES)
+        return torch.cat([self.net.trunk(chunk) for chunk in frames.tensor_split(calls)])
+
+    @torch.inference_mode()
+    def candidate_values(self, feature: torch.Tensor) -> np.ndarray:
+        """`values` from one frame's feature (D,): the head on all its candidates in one call."""
+        out = self.net.q_values(feature, self._actions_t)
         return (probability(out) if self.kind == "coll" else out).cpu().numpy()
 
     def choose(self, values: np.ndarray) -> float:
@@ -104,6 +124,14 @@ class QNetPolicy:
         values = self.values(obs["image"])
         self.last_values = self.shown(values)
         return self.choose(values)
+
+    def act_batch(self, observations: Sequence[Observation]) -> list[float]:
+        """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, the head per
+        frame; `last_batch_values` holds what `last_values` would hold for each."""
+        features = self.features([obs["image"] for obs in observations])
+        values = [self.candidate_values(feature) for feature in features]
+        self.last_batch_values = [self.shown(v) for v in values]
+        return [self.choose(v) for v in values]
 
     def describe(self) -> dict[str, Any]:
         return {

@@ -1,7 +1,9 @@
 """Drive a policy once in each evaluation canyon; metrics, trajectories, maps (docs/design.md#evaluation).
 
-Each canyon is driven in a worker process with one torch thread and sensor noise seeded by the
-canyon index, so the results are the same whatever the number of workers.
+The canyons are driven in worker processes with one torch thread each, every worker its share in
+lock-step (`depthq.evaluate.lockstep`) or one canyon at a time (`EvalConfig.lockstep`), with sensor
+noise seeded by the canyon index, so the results are the same whatever the number of workers and
+either way.
 """
 
 from __future__ import annotations
@@ -23,14 +25,10 @@ from depthq.control.heuristic import DepthHeuristic
 from depthq.control.registry import make_policy
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4, plot_trajectories
-from depthq.evaluate.metrics import (
-    distance_from_spawn,
-    distance_to_collision,
-    imitation_loss,
-    run_success,
-    summarize,
-)
-from depthq.evaluate.video import VIDEO_SCALE, write_video
+from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
+from depthq.evaluate.metrics import summarize
+from depthq.evaluate.run_record import FIG4_EVERY, RunRecord
+from depthq.evaluate.video import write_video
 from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
@@ -60,7 +58,6 @@ RUN_FIELDS = (
     "closest",
     "canyon_length",
 )
-FIG4_EVERY, FIG4_FRAMES = 5, 4  # the first canyon keeps every 5th frame; Fig. 4 shows 4, evenly spread
 
 
 @dataclass(frozen=True)
@@ -74,6 +71,9 @@ class EvalConfig:
     which: str | None = None
     # One decision per camera frame. None: the rate a checkpoint records (else the default).
     decision_hz: float | None = None
+    # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep);
+    # the runs are the same either way; false drives them one after the other.
+    lockstep: bool = True
 
     def __post_init__(self) -> None:
         families = sorted({CanyonId.parse(c).family for c in self.canyons})
@@ -141,51 +141,21 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
 def drive(
     policy, env, expert, canyon: str, seed: int, keep_every: int = 0, video: bool = False
 ) -> dict[str, Any]:
-    """One run: the policy drives, the expert is asked on the same observations. `keep_every` keeps
-    Fig. 4 snapshots; `video` keeps every decision (the camera frame at half size) for the MP4."""
+    """One run, alone: the policy drives, the expert is asked on the same observations. `keep_every`
+    keeps Fig. 4 snapshots; `video` keeps every decision (the camera frame at half size) for the MP4."""
     obs, info = env.reset(seed=seed, options={"canyon": parse_canyon(canyon)})
     policy.reset(seed)
-    poses, actions, expert_actions, ms, snaps, frames = [info["pose"]], [], [], [], [], []
-    done, step = False, 0
+    record, done = RunRecord(canyon, info, keep_every, video), False
     while not done:
-        expert_actions.append(expert.act(obs))
+        expert_action = expert.act(obs)
         t0 = time.perf_counter()
         action = float(np.clip(policy.act(obs), env.action_space.low[0], env.action_space.high[0]))
-        ms.append((time.perf_counter() - t0) * 1e3)
-        values = getattr(policy, "last_values", None)
+        ms = (time.perf_counter() - t0) * 1e3
         before = obs
         obs, _, terminated, truncated, info = env.step(np.array([action], np.float32))
-        moment = {"values": values, "true_bins": obs["bins"], "pose": poses[-1], "action": action}
-        if keep_every and step % keep_every == 0 and values is not None:
-            snaps.append(_copy({**moment, "step": step, "image": before["image"]}))
-        if video:
-            frames.append(_copy({**moment, "image": before["image"][::VIDEO_SCALE, ::VIDEO_SCALE]}))
-        actions.append(action)
-        poses.append(info["pose"])
+        record.add(before, expert_action, action, ms, getattr(policy, "last_values", None), obs, info)
         done = terminated or truncated
-        step += 1
-    poses = np.asarray(poses)
-    distance = distance_from_spawn(poses)
-    shown = np.unique(np.linspace(0, len(snaps) - 1, FIG4_FRAMES).round().astype(int)) if snaps else []
-    goal, reason = FAMILIES[parse_canyon(canyon).family].goal, info["end_reason"]
-    return {
-        "canyon": canyon,
-        "distance": distance,
-        "path_length": info["path_length"],
-        "success": run_success(goal, distance, reason),
-        "end_reason": reason,
-        "steps": step,
-        "imitation_loss": imitation_loss(np.array(actions), np.array(expert_actions)),
-        "decision_ms_median": float(np.median(ms)),
-        "progress": info["progress"],
-        "distance_to_collision": distance_to_collision(info["progress"], reason, info["canyon_length"]),
-        "closest": info["closest"],
-        "canyon_length": info["canyon_length"],
-        "poses": poses.astype(np.float32),
-        "actions": np.asarray(actions, np.float32),
-        "snapshots": [snaps[i] for i in shown],
-        "video": frames,
-    }
+    return record.result(info)
 
 
 def _key(canyon: str) -> str:
@@ -193,30 +163,47 @@ def _key(canyon: str) -> str:
     return canyon.replace(":", "_").replace("/", "_")
 
 
-def _copy(record: dict[str, Any]) -> dict[str, Any]:
-    """A moment of a run kept for a figure: arrays copied (the env reuses its buffers)."""
-    return {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in record.items()}
-
-
 class _EvalWorker:
-    """One policy and one simulator, driving canyon after canyon (a worker of `depthq.parallel`)."""
+    """One policy and its simulators, driving share after share of the canyons (a worker of
+    `depthq.parallel`): a share's canyons in lock-step (`depthq.evaluate.lockstep`) or one by one."""
 
     def __init__(
         self, policy_spec: str, config: EvalConfig, device: str = "cpu", video: bool = False
     ) -> None:
         torch.set_num_threads(1)  # same float sums in every process: results independent of W
-        self.seed, self.video = config.seed, video
-        self.policy = make_policy(policy_spec, seed=config.seed, which=config.which, device=device)
-        self.env, self.expert = CanyonEnv(config.env), DepthHeuristic()
+        self.config, self.video = config, video
+        self.make_policy = partial(make_policy, policy_spec, config.seed, config.which, device)
+        self.policy = self.make_policy()
+        self.envs, self.expert = [CanyonEnv(config.env)], DepthHeuristic()
 
-    def __call__(self, task: tuple[int, str]) -> dict[str, Any]:
-        k, canyon = task  # the first canyon keeps Fig. 4 snapshots and, when wanted, the video's frames
-        seed = self.seed + int(canyon.split(":")[1])
-        keep = FIG4_EVERY if k == 0 else 0
-        return drive(self.policy, self.env, self.expert, canyon, seed, keep, self.video and k == 0)
+    def __call__(self, share: tuple[tuple[int, str], ...]) -> list[tuple[int, dict[str, Any]]]:
+        # the first canyon keeps Fig. 4 snapshots and, when wanted, the video's frames
+        lanes = [
+            Lane(canyon, self.config.seed + CanyonId.parse(canyon).index, FIG4_EVERY if k == 0 else 0,
+                 self.video and k == 0)
+            for k, canyon in share
+        ]
+        if self.config.lockstep:
+            while len(self.envs) < len(lanes):
+                self.envs.append(CanyonEnv(self.config.env))
+            policies = lane_policies(self.policy, self.make_policy, len(lanes))
+            runs = drive_lockstep(policies, self.envs[: len(lanes)], self.expert, lanes)
+        else:
+            runs = [drive(self.policy, self.envs[0], self.expert, lane.canyon, lane.seed, lane.keep_every,
+                          lane.video) for lane in lanes]
+        return [(k, run) for (k, _), run in zip(share, runs, strict=True)]
 
     def close(self) -> None:
-        self.env.close()
+        for env in self.envs:
+            env.close()
+
+
+def shares(canyons: tuple[str, ...], lockstep: bool, workers: int) -> list[tuple[tuple[int, str], ...]]:
+    """The canyons as the workers' tasks, (position, canyon) each: in lock-step one share per worker,
+    dealt round-robin (their sizes differ by one at most); else a canyon per task, as workers free up."""
+    tasks = tuple(enumerate(canyons))
+    n = min(workers, len(tasks)) if lockstep else len(tasks)
+    return [tasks[w::n] for w in range(n)]
 
 
 def evaluate(
@@ -261,10 +248,10 @@ def evaluate(
         disable=not progress,
         dynamic_ncols=True,
     ) as bar:
-        tasks, gpu = list(enumerate(config.canyons)), where.startswith("cuda")
-        for k, run in executor.run(make_worker, tasks, workers, "evaluation", gpu):
-            runs[k] = run
-            bar.update(1)
+        tasks, gpu = shares(config.canyons, config.lockstep, workers), where.startswith("cuda")
+        for _, done in executor.run(make_worker, tasks, workers, "evaluation", gpu):
+            runs.update(done)
+            bar.update(len(done))
             bar.set_postfix(success=sum(r["success"] for r in runs.values()))
     ordered = [runs[k] for k in sorted(runs)]
     offline = None

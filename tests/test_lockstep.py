@@ -1,0 +1,146 @@
+"""Lock-step evaluation (docs/design.md#lockstep) gives the runs of one canyon at a time: a batched
+decision is one-frame decisions to the bit, and whole runs (every action, every runs.csv record)
+are the same. Real MuJoCo runs, real EfficientNet-Lite0 weights, real trainings; no mocks."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import replace
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from depthq.control.heuristic import DepthHeuristic
+from depthq.control.ou import OUPolicy
+from depthq.control.policy import BatchPolicy
+from depthq.control.qnet_policy import BATCH_FRAMES, QNetPolicy
+from depthq.evaluate.evaluate import EvalConfig, drive, evaluate, parse_canyon_set, shares
+from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
+from depthq.nets.heads import HeadConfig, QNet, build_head
+from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
+from depthq.sim.env import CanyonEnv
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+
+CANYONS = ("val:1000", "val:1001", "val:1002")
+
+
+def _untrained() -> list[QNetPolicy]:
+    """Depth-Q-Net (one step and 3 ahead) and Coll-Q-Net policies on the real trunk with freshly
+    initialised heads (bits need no training)."""
+    torch.manual_seed(0)
+    trunk = build_trunk(DEFAULT_TRUNK)
+    heads = [HeadConfig("depth", trunk.feature_dim), HeadConfig("depth", trunk.feature_dim, lookahead=3),
+             HeadConfig("coll", trunk.feature_dim)]
+    return [QNetPolicy(QNet(trunk, build_head(head)), head.kind) for head in heads]
+
+
+def _same_run(a: dict, b: dict) -> bool:
+    """Two runs' records equal, their decision times aside (arrays compared element by element)."""
+    keys = a.keys() - {"decision_ms_median", "snapshots", "video"}
+    return keys == b.keys() - {"decision_ms_median", "snapshots", "video"} and all(
+        np.array_equal(a[k], b[k]) for k in keys
+    )
+
+
+def _alone_and_lockstep(make, lanes: list[Lane], time_limit_s: float) -> tuple[list, list]:
+    """Every lane driven alone in one env by a policy from `make`, then all of them in lock-step, each
+    in an env of its own."""
+    policy = make()
+    config = EvalConfig(canyons=tuple(lane.canyon for lane in lanes), time_limit_s=time_limit_s).env
+    envs, expert = [CanyonEnv(config) for _ in lanes], DepthHeuristic()
+    try:
+        alone = [drive(policy, envs[0], expert, lane.canyon, lane.seed, lane.keep_every, lane.video)
+                 for lane in lanes]
+        together = drive_lockstep(lane_policies(policy, make, len(lanes)), envs, expert, lanes)
+    finally:
+        for env in envs:
+            env.close()
+    return alone, together
+
+
+def test_a_batched_decision_is_one_frame_decisions_to_the_bit() -> None:
+    """With one torch thread, as in an evaluation's workers (two threads split a batch's work
+    differently from one frame's)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        rng = np.random.default_rng(0)
+        observations = [{"image": f} for f in rng.integers(0, 256, (BATCH_FRAMES + 3, 308, 410, 3), np.uint8)]
+        for policy in _untrained():
+            alone, values = [], []
+            for obs in observations:
+                alone.append(policy.act(obs))
+                values.append(policy.last_values)
+            assert policy.act_batch(observations) == alone  # two trunk calls, the head per frame
+            assert all(map(np.array_equal, policy.last_batch_values, values))
+            assert policy.act_batch(observations[5:7]) == alone[5:7]  # whichever frames share the call
+            assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_which_policies_decide_in_batches() -> None:
+    assert isinstance(DepthHeuristic(), BatchPolicy) and not isinstance(OUPolicy(), BatchPolicy)
+    heuristic = DepthHeuristic()
+    assert lane_policies(heuristic, DepthHeuristic, 3) == [heuristic] * 3
+    ou = lane_policies(OUPolicy(seed=0), OUPolicy, 3)  # per-run noise state: an instance per run
+    assert len({id(p) for p in ou}) == 3
+    assert shares(tuple(f"eval:{i}" for i in range(5)), True, 2) == [
+        ((0, "eval:0"), (2, "eval:2"), (4, "eval:4")), ((1, "eval:1"), (3, "eval:3"))
+    ]
+    assert len(shares(("eval:0", "eval:1"), False, 2)) == 2 and len(shares(("eval:0",), True, 4)) == 1
+
+
+@pytest.mark.parametrize("name", ["heuristic", "ou"])
+def test_reference_policies_drive_in_lockstep_as_alone(name: str) -> None:
+    make = {"heuristic": DepthHeuristic, "ou": lambda: OUPolicy(seed=0)}[name]
+    lanes = [Lane(c, 1000 + k, keep_every=5 * (k == 0), video=k == 0) for k, c in enumerate(CANYONS)]
+    alone, together = _alone_and_lockstep(make, lanes, time_limit_s=3.0)
+    assert [r["canyon"] for r in together] == list(CANYONS)
+    assert all(_same_run(a, b) for a, b in zip(alone, together, strict=True))
+    assert len(together[0]["video"]) == together[0]["steps"] and not together[1]["video"]
+
+
+@pytest.fixture(scope="module")
+def checkpoints(tmp_path_factory: pytest.TempPathFactory, small_dataset: Path) -> dict[str, Path]:
+    """A Depth-Q-Net and a Coll-Q-Net trained for two batches on conftest's small dataset."""
+    root = tmp_path_factory.mktemp("lockstep")
+    fast = {"epochs": 1, "train_batches": 2, "val_batches": 1, "batch_size": 16}
+    return {
+        kind: train(TrainConfig(model=kind, data=str(small_dataset), **fast), root / kind, progress=False)
+        for kind in ("depth", "coll")
+    }
+
+
+@pytest.mark.slow
+def test_a_checkpoint_drives_in_lockstep_as_alone(checkpoints: dict[str, Path]) -> None:
+    for folder in checkpoints.values():
+        lanes = [Lane(c, 1000 + k, keep_every=5 * (k == 0), video=k == 0) for k, c in enumerate(CANYONS)]
+        alone, together = _alone_and_lockstep(partial(QNetPolicy.from_checkpoint, folder), lanes, 6.0)
+        assert all(_same_run(a, b) for a, b in zip(alone, together, strict=True))
+        snaps = zip(alone[0]["snapshots"], together[0]["snapshots"], strict=True)
+        assert all(np.array_equal(a["values"], b["values"]) for a, b in snaps)
+
+
+def _records(folder: Path) -> list[dict[str, str]]:
+    with (folder / "runs.csv").open() as f:
+        return [{k: v for k, v in row.items() if k != "decision_ms_median"} for row in csv.DictReader(f)]
+
+
+@pytest.mark.slow
+def test_lockstep_evaluation_writes_the_sequential_runs(checkpoints: dict[str, Path], tmp_path: Path) -> None:
+    config = EvalConfig(canyons=parse_canyon_set("val:1000-1002"), time_limit_s=6.0)
+    spec = str(checkpoints["depth"])
+    alone = replace(config, lockstep=False)
+    evaluate(spec, tmp_path / "alone", alone, workers=1, progress=False, video=False)
+    for workers in (1, 2):
+        out = tmp_path / f"lockstep_w{workers}"
+        evaluate(spec, out, config, workers=workers, progress=False, video=workers == 1)
+        assert _records(out) == _records(tmp_path / "alone")
+        with np.load(out / "trajectories.npz") as a, np.load(tmp_path / "alone" / "trajectories.npz") as b:
+            assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
+    assert (tmp_path / "lockstep_w1" / "video.mp4").stat().st_size > 1000
