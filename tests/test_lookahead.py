@@ -240,6 +240,7 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 @pytest.mark.slow
 def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: Path, tmp_path: Path) -> None:
     from depthq.control.qnet_policy import QNetPolicy
+    from depthq.control.registry import make_policy
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
     from depthq.nets.checkpoint import load_qnet
     from depthq.train.trainer import train
@@ -254,10 +255,14 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     policy = QNetPolicy.from_checkpoint(out)
     frame = np.zeros((308, 410, 3), np.uint8)
     assert policy.values(frame).shape == (3, 3, 26)
+    switching = make_policy(str(out), selection=Selection(rule="discounted_nearest_bin", switch=True))
+    assert switching.values(frame).shape == (15, 3, 26) and switching.act({"image": frame}) in ACTIONS
+    assert switching.last_values.shape == (3, 26)  # what Fig. 4 draws: each held action at t+1
 
     config = EvalConfig(canyons=parse_canyon_set("val:1000"), time_limit_s=3.0)
     result = evaluate(str(out), tmp_path / "eval", config, workers=1, progress=False, video=False)
     assert result["summary"]["runs"] == 1 and result["policy"]["lookahead"] == 3
+    assert (tmp_path / "eval" / "fig4_qualitative.png").is_file()  # Fig. 4: each held action at t+1
     offline = result["offline"]  # the first step's loss, and every step's
     assert offline["value"] == offline["steps"][0] and len(offline["steps"]) == 3
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.onnx_policy import OnnxPolicy
 from depthq.control.ou import OUPolicy
@@ -16,20 +17,25 @@ BUILTIN = ("heuristic", "ou")
 
 
 def make_policy(
-    spec: str, seed: int | None = None, which: str | None = None, device: str = "cpu"
+    spec: str,
+    seed: int | None = None,
+    which: str | None = None,
+    device: str = "cpu",
+    selection: Selection | None = None,
 ) -> Policy:
     """`spec` is 'heuristic', 'ou', the path of a trained Depth-Q-Net / Coll-Q-Net checkpoint folder
     (`which` weights, `depthq.nets.checkpoint.weights_stem`, None: the checkpoint's choice; run on
-    torch `device`) or 'onnx:PATH'."""
+    torch `device`) or 'onnx:PATH'. `selection`: how a Depth-Q-Net scores its candidates (None: the
+    default rule; docs/design.md#lookahead-selection)."""
     if spec == "heuristic":
         return DepthHeuristic()
     if spec == "ou":
         return OUPolicy(seed=seed)
     if spec.startswith("onnx:"):
-        return OnnxPolicy(Path(spec.removeprefix("onnx:")))
+        return OnnxPolicy(Path(spec.removeprefix("onnx:")), selection=selection)
     path = Path(spec)
     if path.is_dir():
-        return QNetPolicy.from_checkpoint(path, which=which, device=device)
+        return QNetPolicy.from_checkpoint(path, which=which, device=device, selection=selection)
     raise ConfigError(
         f"unknown policy {spec!r}: expected one of {BUILTIN}, an existing checkpoint folder or onnx:PATH"
     )
