@@ -5,6 +5,7 @@ are the same. Real MuJoCo runs, real EfficientNet-Lite0 weights, real trainings;
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 
+from depthq.cli import main
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
@@ -62,25 +64,28 @@ def _alone_and_lockstep(make, lanes: list[Lane], time_limit_s: float) -> tuple[l
     return alone, together
 
 
-def test_a_batched_decision_is_one_frame_decisions_to_the_bit() -> None:
-    """With one torch thread, as in an evaluation's workers (two threads split a batch's work
-    differently from one frame's)."""
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """One torch thread, as in an evaluation's workers: with two, torch splits a batch's sums
+    otherwise than one frame's (the bits differ at any batch size)."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
-    try:
-        rng = np.random.default_rng(0)
-        observations = [{"image": f} for f in rng.integers(0, 256, (BATCH_FRAMES + 3, 308, 410, 3), np.uint8)]
-        for policy in _untrained():
-            alone, values = [], []
-            for obs in observations:
-                alone.append(policy.act(obs))
-                values.append(policy.last_values)
-            assert policy.act_batch(observations) == alone  # two trunk calls, the head per frame
-            assert all(map(np.array_equal, policy.last_batch_values, values))
-            assert policy.act_batch(observations[5:7]) == alone[5:7]  # whichever frames share the call
-            assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))
-    finally:
-        torch.set_num_threads(threads)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_a_batched_decision_is_one_frame_decisions_to_the_bit() -> None:
+    rng = np.random.default_rng(0)
+    observations = [{"image": f} for f in rng.integers(0, 256, (BATCH_FRAMES + 3, 308, 410, 3), np.uint8)]
+    for policy in _untrained():
+        alone, values = [], []
+        for obs in observations:
+            alone.append(policy.act(obs))
+            values.append(policy.last_values)
+        assert policy.act_batch(observations) == alone  # two trunk calls, the head per frame
+        assert all(map(np.array_equal, policy.last_batch_values, values))
+        assert policy.act_batch(observations[5:7]) == alone[5:7]  # whichever frames share the call
+        assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))
 
 
 def test_which_policies_decide_in_batches() -> None:
@@ -120,7 +125,7 @@ def checkpoints(tmp_path_factory: pytest.TempPathFactory, small_dataset: Path) -
 def test_a_checkpoint_drives_in_lockstep_as_alone(checkpoints: dict[str, Path]) -> None:
     for folder in checkpoints.values():
         lanes = [Lane(c, 1000 + k, keep_every=5 * (k == 0), video=k == 0) for k, c in enumerate(CANYONS)]
-        alone, together = _alone_and_lockstep(partial(QNetPolicy.from_checkpoint, folder), lanes, 6.0)
+        alone, together = _alone_and_lockstep(partial(QNetPolicy.from_checkpoint, folder), lanes, 4.0)
         assert all(_same_run(a, b) for a, b in zip(alone, together, strict=True))
         snaps = zip(alone[0]["snapshots"], together[0]["snapshots"], strict=True)
         assert all(np.array_equal(a["values"], b["values"]) for a, b in snaps)
@@ -134,13 +139,27 @@ def _records(folder: Path) -> list[dict[str, str]]:
 @pytest.mark.slow
 def test_lockstep_evaluation_writes_the_sequential_runs(checkpoints: dict[str, Path], tmp_path: Path) -> None:
     config = EvalConfig(canyons=parse_canyon_set("val:1000-1002"), time_limit_s=6.0)
-    spec = str(checkpoints["depth"])
-    alone = replace(config, lockstep=False)
-    evaluate(spec, tmp_path / "alone", alone, workers=1, progress=False, video=False)
-    for workers in (1, 2):
-        out = tmp_path / f"lockstep_w{workers}"
-        evaluate(spec, out, config, workers=workers, progress=False, video=workers == 1)
-        assert _records(out) == _records(tmp_path / "alone")
-        with np.load(out / "trajectories.npz") as a, np.load(tmp_path / "alone" / "trajectories.npz") as b:
-            assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
-    assert (tmp_path / "lockstep_w1" / "video.mp4").stat().st_size > 1000
+    spec, alone, together = str(checkpoints["depth"]), tmp_path / "alone", tmp_path / "lockstep"
+    evaluate(spec, alone, replace(config, lockstep=False), workers=1, progress=False, video=False)
+    evaluate(spec, together, config, workers=1, progress=False)  # one worker: all three in one batch
+    assert _records(together) == _records(alone)
+    with np.load(together / "trajectories.npz") as a, np.load(alone / "trajectories.npz") as b:
+        assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
+    assert (together / "video.mp4").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_benches_time_a_batch_and_both_evaluations(
+    checkpoints: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    def bench(*args: str) -> dict:
+        assert main(["bench", *args, "--json"]) == 0
+        return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+    result = bench("policy", "--policy", str(checkpoints["coll"]), "--decisions", "2", "--batches", "1",
+                   "--threads", "1")
+    (policy,) = result["policies"]
+    assert result["batch"] == 20 and 0 < policy["batch_ms_per_decision"] < policy["batch_ms_median"]
+    result = bench("evaluate", "--policy", "heuristic", "--canyons", "val:1000-1001", "--time-limit", "1",
+                   "--workers", "1")
+    assert result["same_runs"] and result["decisions"] == 2 * 4 and result["sequential_s"] > 0

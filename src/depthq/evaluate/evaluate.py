@@ -206,6 +206,34 @@ def shares(canyons: tuple[str, ...], lockstep: bool, workers: int) -> list[tuple
     return [tasks[w::n] for w in range(n)]
 
 
+def drive_canyons(
+    policy_spec: str,
+    config: EvalConfig,
+    workers: int = 2,
+    progress: bool = False,
+    device: str = "cpu",
+    video: bool = False,
+    executor: Executor = LOCAL,
+) -> list[dict[str, Any]]:
+    """Every canyon of `config` driven by `policy_spec` (a checkpoint by its absolute path) on torch
+    `device`, in `executor`'s `workers`: the runs (`RunRecord.result`) in `config.canyons`' order."""
+    runs: dict[int, dict[str, Any]] = {}
+    make_worker = partial(_EvalWorker, policy_spec, config, device, video)
+    with tqdm(
+        total=len(config.canyons),
+        desc=f"evaluate {Path(policy_spec).name}",
+        unit="canyon",
+        disable=not progress,
+        dynamic_ncols=True,
+    ) as bar:
+        tasks, gpu = shares(config.canyons, config.lockstep, workers), device.startswith("cuda")
+        for _, done in executor.run(make_worker, tasks, workers, "evaluation", gpu):
+            runs.update(done)
+            bar.update(len(done))
+            bar.set_postfix(success=sum(r["success"] for r in runs.values()))
+    return [runs[k] for k in sorted(runs)]
+
+
 def evaluate(
     policy_spec: str,
     out: Path,
@@ -238,22 +266,8 @@ def evaluate(
         dataset = training_data(read_config(Path(policy_spec)), data)
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
-    runs: dict[int, dict[str, Any]] = {}
     start = time.perf_counter()
-    make_worker = partial(_EvalWorker, policy_spec, config, where, video)
-    with tqdm(
-        total=len(config.canyons),
-        desc=f"evaluate {Path(policy_spec).name}",
-        unit="canyon",
-        disable=not progress,
-        dynamic_ncols=True,
-    ) as bar:
-        tasks, gpu = shares(config.canyons, config.lockstep, workers), where.startswith("cuda")
-        for _, done in executor.run(make_worker, tasks, workers, "evaluation", gpu):
-            runs.update(done)
-            bar.update(len(done))
-            bar.set_postfix(success=sum(r["success"] for r in runs.values()))
-    ordered = [runs[k] for k in sorted(runs)]
+    ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None
     if dataset is not None:
         from depthq.evaluate.offline import offline_metric  # the training stack, as above

@@ -31,9 +31,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="a checkpoint folder or onnx:PATH; repeat to compare (default: an untrained Depth-Q-Net)",
     )
     pol.add_argument("--decisions", type=int, default=200)
-    for parser in (sim, col, feat, tr, pol):
+    pol.add_argument("--batches", type=int, default=20,
+                     help="act_batch calls on 20 frames, as lock-step evaluation decides for 20 canyons")
+    pol.add_argument("--threads", type=int, default=None,
+                     help="torch threads (default: this process's cores; an evaluation worker has 1)")
+    ev = sub.add_parser("evaluate", help="one policy in 20 canyons, one canyon at a time vs lock-step")
+    ev.add_argument("--policy", required=True, help="'heuristic', a checkpoint folder or onnx:PATH")
+    ev.add_argument("--canyons", default="val:1000-1019",
+                    help="a canyon set, as evaluate's --canyons (default: 20 val canyons)")
+    ev.add_argument("--workers", type=int, default=2)
+    ev.add_argument("--time-limit", type=float, default=None, help="seconds per run [the family's]")
+    for parser in (sim, col, feat, tr, pol, ev):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
-    for parser in (feat, tr, pol):
+    for parser in (feat, tr, pol, ev):
         parser.add_argument("--device", default="auto", help=DEVICE_HELP)
 
 
@@ -83,12 +93,37 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"{r['samples_per_s']} head samples/s, {r['head_gflops']} GFLOP/s = {r['ratio']} × matmul's "
             f"{r['matmul_gflops']} GFLOP/s"
         )
+    if args.what == "evaluate":
+        _positive("--workers", args.workers)
+        from depthq.bench.evaluate import bench_evaluate  # torch, mujoco: off the CLI's startup
+        from depthq.evaluate.evaluate import parse_canyon_set
+
+        canyons = parse_canyon_set(args.canyons)
+        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device)
+        return r, (
+            f"{r['policy']} in {r['canyons']} canyons ({r['decisions']} decisions), {r['workers']} "
+            f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
+            f"(×{r['speedup']}), {'the same' if r['same_runs'] else 'DIFFERENT'} runs"
+        )
     _positive("--decisions", args.decisions)
+    if args.batches < 0:
+        raise ConfigError(f"--batches must be >= 0, got {args.batches}")
+    if args.threads is not None:
+        _positive("--threads", args.threads)
     from depthq.bench.policy import bench_policy  # torch, mujoco: off the CLI's startup
 
-    r = bench_policy(args.policy, args.decisions, device=args.device)
-    each = [f"{p['policy']}: {p['ms_median']} ms median ({p['ms_p90']} ms p90)" for p in r["policies"]]
+    r = bench_policy(args.policy, args.decisions, args.device, args.batches, args.threads)
+    each = [f"{p['policy']}: {p['ms_median']} ms median ({p['ms_p90']} ms p90)" + _in_batch(p, r["batch"])
+            for p in r["policies"]]
     return r, "per decision: " + "; ".join(each) + f" ({r['threads']} threads)"
+
+
+def _in_batch(policy: dict, size: int) -> str:
+    """A policy's batch figure, if it has one."""
+    if "batch_ms_median" not in policy:
+        return ""
+    per_batch = policy["batch_ms_median"]
+    return f", {policy['batch_ms_per_decision']} ms in a batch of {size} ({per_batch} ms per batch)"
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,0 +1,43 @@
+"""Evaluation speed: one policy driven in 20 canyons one canyon at a time, then in lock-step
+(docs/design.md#lockstep), in the same workers; seconds, decisions per second, and whether the two
+gave the same runs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from depthq.evaluate.evaluate import EvalConfig, data_rate, drive_canyons
+from depthq.nets.device import resolve_device
+
+
+def bench_evaluate(
+    spec: str,
+    canyons: tuple[str, ...],
+    workers: int = 2,
+    time_limit_s: float | None = None,
+    device: str = "auto",
+) -> dict:
+    """Wall seconds of `drive_canyons` for `spec` in `canyons`, sequential then lock-step: workers'
+    start (processes, policy, simulators) and every run, no files written, no offline metric."""
+    where = str(resolve_device(device))
+    spec = str(Path(spec).resolve()) if Path(spec).is_dir() else spec
+    config = EvalConfig(canyons=canyons, time_limit_s=time_limit_s, decision_hz=data_rate(spec))
+    seconds, runs = {}, {}
+    for name, lockstep in (("sequential", False), ("lockstep", True)):
+        start = time.perf_counter()
+        runs[name] = drive_canyons(spec, replace(config, lockstep=lockstep), workers, device=where)
+        seconds[name] = time.perf_counter() - start
+    decisions = sum(r["steps"] for r in runs["lockstep"])
+    actions = [[r["actions"].tolist() for r in runs[name]] for name in seconds]
+    return {
+        "policy": Path(spec).name,
+        "canyons": len(canyons),
+        "workers": workers,
+        "decisions": decisions,
+        **{f"{name}_s": round(s, 1) for name, s in seconds.items()},
+        **{f"{name}_decisions_per_s": round(decisions / s, 1) for name, s in seconds.items()},
+        "speedup": round(seconds["sequential"] / seconds["lockstep"], 2),
+        "same_runs": actions[0] == actions[1],
+    }
