@@ -282,8 +282,11 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     from depthq.control.onnx_policy import OnnxPolicy
     from depthq.deploy.onnx_export import export_onnx
 
-    onnx_policy = OnnxPolicy(export_onnx(out, tmp_path / "onnx"))
+    path = export_onnx(out, tmp_path / "onnx")
+    onnx_policy = OnnxPolicy(path)
     assert onnx_policy.lookahead == 3
+    onnx_switching = OnnxPolicy(path, selection=switching.selection)  # 15 sequences through the graph
+    np.testing.assert_allclose(onnx_switching.values(frame), switching.values(frame), atol=1e-4)
     with Dataset.open(small_dataset).reader(Dataset.open(small_dataset).entries("val")[0]) as reader:
         frames = [reader.image(t) for t in range(0, 20, 4)]
     for f in frames:
