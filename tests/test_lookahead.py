@@ -206,6 +206,7 @@ def test_selection_over_sequences_min_or_discounted_first_action() -> None:
         ({"lookahead": 0}, "train.lookahead must be an integer >= 1, got 0"),
         ({"lookahead": 2.5}, "train.lookahead must be an integer >= 1, got 2.5"),
         ({"model": "coll", "lookahead": 3}, "its lookahead must be 1, got 3"),
+        ({"lookahead": 15}, r"train.lookahead 15 is more steps .* = 14\)"),
         ({"lookahead_discount": 0}, r"train.lookahead_discount must be in \(0, 1\], got 0"),
         ({"lookahead_discount": 1.2}, r"train.lookahead_discount must be in \(0, 1\], got 1.2"),
     ],

@@ -116,6 +116,12 @@ class TrainConfig:
         _int_at_least("horizon", self.horizon, 1)
         _int_at_least("min_frames", self.min_frames, self.horizon + 2)
         _int_at_least("action_lag", self.action_lag, 0)
+        steps = self.min_frames - self.horizon - 1 - self.action_lag  # in the shortest usable run
+        if self.lookahead > steps:
+            raise ConfigError(
+                f"train.lookahead {self.lookahead} is more steps than the shortest usable run has after "
+                f"a sample (min_frames - horizon - 1 - action_lag = {steps}): raise min_frames or lower it"
+            )
         if self.lr is not None:
             _positive_float("lr", self.lr)
         _positive_float("eps", self.eps)
