@@ -71,8 +71,8 @@ class EvalConfig:
     which: str | None = None
     # One decision per camera frame. None: the rate a checkpoint records (else the default).
     decision_hz: float | None = None
-    # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep);
-    # the runs are the same either way; false drives them one after the other.
+    # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
+    # the runs of --no-lockstep, which drives them one after the other.
     lockstep: bool = True
 
     def __post_init__(self) -> None:
@@ -172,7 +172,9 @@ class _EvalWorker:
     ) -> None:
         torch.set_num_threads(1)  # same float sums in every process: results independent of W
         self.config, self.video = config, video
-        self.make_policy = partial(make_policy, policy_spec, config.seed, config.which, device)
+        self.make_policy = partial(
+            make_policy, policy_spec, seed=config.seed, which=config.which, device=device
+        )
         self.policy = self.make_policy()
         self.envs, self.expert = [CanyonEnv(config.env)], DepthHeuristic()
 

@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ev.add_argument("--policy", required=True, help="'heuristic', a checkpoint folder or onnx:PATH")
     ev.add_argument("--canyons", default="val:1000-1019",
                     help="a canyon set, as evaluate's --canyons (default: 20 val canyons)")
-    ev.add_argument("--workers", type=int, default=2)
+    ev.add_argument("--workers", type=int, default=2, help="processes, each driving its share of the canyons")
     ev.add_argument("--time-limit", type=float, default=None, help="seconds per run [the family's]")
     for parser in (sim, col, feat, tr, pol, ev):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
