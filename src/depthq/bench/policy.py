@@ -24,19 +24,21 @@ def bench_policy(
     specs: list[str] | None = None,
     decisions: int = 200,
     device: str = "auto",
-    batches: int = 20,
+    batches: int | None = None,
     threads: int | None = None,
 ) -> dict:
     """Median and 90th-percentile ms per decision on real rendered frames, for each policy in `specs`
     (checkpoint folders or 'onnx:PATH'), taken in turns on the same frames so they compare fairly;
-    then, for a `BatchPolicy`, `batches` calls of `act_batch` on BATCH frames: ms per call and per
-    decision in it. `threads`: torch's (None: this process's cores; an evaluation worker has one).
+    then, for a `BatchPolicy`, `batches` calls of `act_batch` on BATCH frames (None: as many decisions
+    as `decisions`, at least one call): ms per call and per decision in it. `threads`: torch's (None:
+    this process's cores; an evaluation worker has one).
 
     Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
     """
     where = str(resolve_device(device))
     torch.set_num_threads(threads or cores())
+    batches = max(1, decisions // BATCH) if batches is None else batches
     if specs:
         policies = [make_policy(spec, device=where) for spec in specs]
     else:

@@ -170,7 +170,9 @@ class _EvalWorker:
     def __init__(
         self, policy_spec: str, config: EvalConfig, device: str = "cpu", video: bool = False
     ) -> None:
-        torch.set_num_threads(1)  # same float sums in every process: results independent of W
+        # Same float sums in every process (results independent of W), and a batched decision's
+        # values those of one frame alone (docs/design.md#lockstep).
+        torch.set_num_threads(1)
         self.config, self.video = config, video
         self.make_policy = partial(
             make_policy, policy_spec, seed=config.seed, which=config.which, device=device

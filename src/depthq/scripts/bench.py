@@ -31,8 +31,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="a checkpoint folder or onnx:PATH; repeat to compare (default: an untrained Depth-Q-Net)",
     )
     pol.add_argument("--decisions", type=int, default=200)
-    pol.add_argument("--batches", type=int, default=20,
-                     help="act_batch calls on 20 frames, as lock-step evaluation decides for 20 canyons")
+    pol.add_argument("--batches", type=int, default=None,
+                     help="act_batch calls on 20 frames, as lock-step evaluation decides for 20 canyons "
+                     "(default: --decisions / 20, at least 1)")
     pol.add_argument("--threads", type=int, default=None,
                      help="torch threads (default: this process's cores; an evaluation worker has 1)")
     ev = sub.add_parser("evaluate", help="one policy in 20 canyons, one canyon at a time vs lock-step")
@@ -106,7 +107,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"(×{r['speedup']}), {'the same' if r['same_runs'] else 'DIFFERENT'} runs"
         )
     _positive("--decisions", args.decisions)
-    if args.batches < 0:
+    if args.batches is not None and args.batches < 0:
         raise ConfigError(f"--batches must be >= 0, got {args.batches}")
     if args.threads is not None:
         _positive("--threads", args.threads)
