@@ -293,3 +293,16 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     for f in frames:
         np.testing.assert_allclose(onnx_policy.values(f), policy.values(f), atol=1e-4)
         assert onnx_policy.act({"image": f}) == policy.act({"image": f})
+
+
+def test_evaluate_flags_choose_the_selection_rule_and_refuse_a_bad_one() -> None:
+    from depthq.evaluate.evaluate import EvalConfig
+    from depthq.scripts.evaluate import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["pol", "--out", "o", "--rule", "discounted_nearest_bin", "--discount", "0.8"])
+    config = config_from_args(EvalConfig, args, canyons=("val:1000",))
+    assert config.selection == Selection(rule="discounted_nearest_bin", discount=0.8, switch=False)
+    with pytest.raises(ConfigError, match=r"selection rule must be one of .*, got 'nearest'"):
+        EvalConfig(rule="nearest")

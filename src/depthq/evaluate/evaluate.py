@@ -21,6 +21,7 @@ import torch
 from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.registry import make_policy
 from depthq.errors import ConfigError
@@ -74,6 +75,11 @@ class EvalConfig:
     # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
     # the runs of --no-lockstep, which drives them one after the other.
     lockstep: bool = True
+    # How a lookahead Depth-Q-Net scores its candidate sequences (docs/design.md#lookahead-selection).
+    # A one-step net's choice is the same under each rule.
+    rule: str = "farthest_nearest_bin"
+    discount: float = 0.9
+    switch: bool = False
 
     def __post_init__(self) -> None:
         families = sorted({CanyonId.parse(c).family for c in self.canyons})
@@ -84,6 +90,11 @@ class EvalConfig:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
         if self.which is not None:
             weights_stem(self.which)
+        _ = self.selection  # checks rule, discount and switch
+
+    @property
+    def selection(self) -> Selection:
+        return Selection(rule=self.rule, discount=self.discount, switch=self.switch)
 
     @property
     def family(self) -> str:
@@ -175,7 +186,8 @@ class _EvalWorker:
         torch.set_num_threads(1)
         self.config, self.video = config, video
         self.make_policy = partial(
-            make_policy, policy_spec, seed=config.seed, which=config.which, device=device
+            make_policy, policy_spec, seed=config.seed, which=config.which, device=device,
+            selection=config.selection,
         )
         self.policy = self.make_policy()
         self.envs, self.expert = [CanyonEnv(config.env)], DepthHeuristic()
@@ -259,7 +271,9 @@ def evaluate(
 
     where = str(resolve_device(device))
     # a bad spec fails here, before any worker starts
-    description = make_policy(policy_spec, seed=config.seed, which=config.which, device=where).describe()
+    description = make_policy(
+        policy_spec, seed=config.seed, which=config.which, device=where, selection=config.selection
+    ).describe()
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
         # the training stack (tensorboard included) only for a checkpoint, not in every worker
