@@ -1,4 +1,5 @@
-"""The checks behind docs/results.md#before-10 ("What this shows"): why Depth-Q-Net steers towards walls on our data.
+"""The checks behind docs/results.md#before-10 ("What this shows"): why Depth-Q-Net steered towards
+walls on our data.
 
     python docs/investigation.py runs/quick/data
 
