@@ -62,6 +62,11 @@ RUNGS = (
     Rung("10 Hz", hz=10.0),
     Rung("final weights after 200 epochs", ("epochs=200", "select=final")),
     Rung("all the paper's settings, 10 Hz", PAPER_SETTINGS, hz=10.0, coll_sets=("lr=0.01",)),
+    # Beyond the paper (docs/design.md#lookahead): Depth-Q-Net trained on the depth 1 … K steps ahead,
+    # to test whether its one-step horizon is what holds it back.
+    Rung("Depth-Q-Net lookahead 3", ("lookahead=3",), nets=("depth",)),
+    Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",)),
+    Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0),
 )
 
 

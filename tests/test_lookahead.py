@@ -172,7 +172,7 @@ def test_selection_at_lookahead_one_picks_what_the_one_step_rule_picks() -> None
             pred[:, rng.integers(26)] = 0.0
         today = pick_best(depth_scores(pred), np.asarray(ACTIONS), maximise=True)
         assert select_action("depth", pred, np.asarray(ACTIONS)) == today
-        for selection in (Selection(), Selection(rule="discounted_nearest_bin", switch=True)):
+        for selection in (Selection(rule="farthest_nearest_bin"), Selection(switch=True)):
             sequences = candidate_sequences(ACTIONS, 1, selection.switch)
             assert select_action("depth", pred[:, None], sequences, selection) == today
 
@@ -186,9 +186,11 @@ def test_selection_over_sequences_min_or_discounted_first_action() -> None:
     pred[0, 0, 0] = 0.2  # right is close at t+1 only
     pred[1, 2, 10] = 0.4  # straight reaches a wall at t+3
     pred[2, :, 5] = 0.9  # left stays 0.9 m from something
-    np.testing.assert_allclose(sequence_scores(pred), [0.2, 0.4, 0.9])
-    assert select_action("depth", pred, held) == 1.0  # the farthest minimum over the steps: left
-    assert select_action("depth", pred[:, :1], held[:, :1]) == 0.0  # one step ahead: straight
+    minimum = Selection(rule="farthest_nearest_bin")
+    np.testing.assert_allclose(sequence_scores(pred, minimum), [0.2, 0.4, 0.9])
+    assert select_action("depth", pred, held, minimum) == 1.0  # the farthest minimum over the steps: left
+    assert select_action("depth", pred[:, :1], held[:, :1], minimum) == 0.0  # one step ahead: straight
+    assert Selection().rule == "discounted_nearest_bin"  # the default, chosen on val canyons
     discounted = Selection(rule="discounted_nearest_bin", discount=0.5)
     w = np.array([1, 0.5, 0.25])
     np.testing.assert_allclose(sequence_scores(pred, discounted), [(0.2 + 0.75 + 0.375) / w.sum(),

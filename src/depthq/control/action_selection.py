@@ -8,9 +8,10 @@ straight is among the best, otherwise to the first tied candidate.
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead-selection) scores candidate action
 sequences (N, K), all in one head pass: each action held for K steps, and with `Selection.switch`
 also each that switches to another action after k steps. A sequence's score is the nearest bin of
-each step, combined over the steps by the rule: its minimum (`farthest_nearest_bin`, the default:
-at K = 1 the rule above) or its discounted mean (`discounted_nearest_bin`). The first action of the
-best sequence is executed; ties go to the first tied sequence that starts straight, else the first.
+each step, combined over the steps by the rule: its discounted mean (`discounted_nearest_bin`, the
+default, chosen on val canyons: docs/design.md#lookahead-selection) or its minimum
+(`farthest_nearest_bin`); at K = 1 both are the rule above. The first action of the best sequence is
+executed; ties go to the first tied sequence that starts straight, else the first.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ class Selection:
     reverses within K frames, so switched sequences are predicted from few training examples.
     """
 
-    rule: str = "farthest_nearest_bin"
+    rule: str = "discounted_nearest_bin"  # chosen on val canyons (docs/design.md#lookahead-selection)
     discount: float = 0.9
     switch: bool = False
 

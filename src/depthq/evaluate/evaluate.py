@@ -77,7 +77,7 @@ class EvalConfig:
     lockstep: bool = True
     # How a lookahead Depth-Q-Net scores its candidate sequences (docs/design.md#lookahead-selection).
     # A one-step net's choice is the same under each rule.
-    rule: str = "farthest_nearest_bin"
+    rule: str = "discounted_nearest_bin"
     discount: float = 0.9
     switch: bool = False
 

@@ -17,7 +17,7 @@ _HELP = {
     "time_limit_s": "seconds per run",
     "which": "best, last (= final) or epoch:N",
     "decision_hz": "decisions per second",
-    "rule": "farthest_nearest_bin or discounted_nearest_bin",
+    "rule": "discounted_nearest_bin or farthest_nearest_bin",
     "discount": "the step weight's base of discounted_nearest_bin",
     "switch": "also score sequences that switch action once",
 }
