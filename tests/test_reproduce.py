@@ -3,6 +3,7 @@
 import csv
 import re
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -49,6 +50,18 @@ def test_report_is_self_contained_and_references_only_existing_files(smoke):
     assert html.count("data:video/mp4;base64,") == 1  # Fig. 4 animated
     for name in ("fig4_qualitative.png", "fig5_convergence.png", "success_vs_runs.png", "fig4_video.mp4"):
         assert (smoke / name).stat().st_size > 5000
+    assert "The paper&#x27;s claims here" in html or "The paper's claims here" in html
+
+
+def test_every_claim_of_the_report_points_at_an_existing_docs_page():
+    from depthq.report.html import CLAIMS
+
+    root = Path(__file__).resolve().parents[1]
+    for _, _, where in CLAIMS:
+        pages = re.findall(r"docs/[\w/]+\.md", where)
+        assert pages, where
+        for page in pages:
+            assert (root / page).is_file(), page
 
 
 @pytest.mark.slow

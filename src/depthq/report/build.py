@@ -104,6 +104,11 @@ def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> No
             ("Fig. 5: convergence", page.img(out / "fig5_convergence.png", "Fig. 5")),
             ("Trajectories", "".join(page.img(p, alt) for p, alt in figures)),
             (
+                "The paper's claims here",
+                "<p>What depthq's own measurements say (not this run's: see the pages named).</p>"
+                + page.table([{"claim": c, "here": h, "measured in": m} for c, h, m in page.CLAIMS]),
+            ),
+            (
                 "Deviations from the paper",
                 page.table([{"original": o, "ours": w, "why": y} for o, w, y in page.DEVIATIONS]),
             ),

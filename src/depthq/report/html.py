@@ -74,6 +74,38 @@ DEVIATIONS = [
 ]
 
 
+# The paper's claims and whether they hold in depthq: words only, each pointing at the measurement
+# (a page of docs/ with the command that reproduces it); the numbers live there, made by runs.
+CLAIMS = [
+    (
+        "Depth-Q-Net drives better than Coll-Q-Net trained on the same number of runs (Table I)",
+        "Only with the least data: ahead at 50 runs in the paper's canyons; from 100 runs on Coll-Q-Net "
+        "drives as far or farther there, and farther in the hard canyons at 200 and 500 runs",
+        "docs/results.md (Table I, 3 seeds); docs/hard_canyons.md#table-i (3 seeds)",
+    ),
+    (
+        "The paper's settings are fair to Coll-Q-Net",
+        "They are not what makes it weak or strong here: under each of them, one at a time, Coll-Q-Net "
+        "drives at least as far as Depth-Q-Net; the raw action, dropout 0.5 and the pooled feature hurt "
+        "Depth-Q-Net at least as much",
+        "docs/ablation.md, one rung per setting (val canyons)",
+    ),
+    (
+        "Coll-Q-Net over-fits, Depth-Q-Net does not (Fig. 5)",
+        "Holds: in a long training Coll-Q-Net's validation loss rises while Depth-Q-Net's does not; yet "
+        "the over-fitted final Coll-Q-Net still drives as far as its best-validation weights",
+        "docs/ablation.md, rung 'final weights after 200 epochs'",
+    ),
+    (
+        "Future depth one frame ahead is a sufficient value signal",
+        "Depends on the frame rate and the canyons: enough in the paper's canyons at 4 Hz, not at 10 Hz; "
+        "in the hard canyons Depth-Q-Net stays behind, and looking 3-5 frames ahead (beyond the paper) "
+        "closes little of the gap",
+        "docs/ablation.md#lookahead, rungs '10 Hz' and 'lookahead'",
+    ),
+]
+
+
 def _figure(path: Path, alt: str, element: str) -> str:
     """`element` (with `{src}` for the file as a data URI) in a captioned figure; a note if missing."""
     caption = html.escape(alt)
