@@ -160,6 +160,7 @@ def test_benches_time_a_batch_and_both_evaluations(
                    "--threads", "1")
     (policy,) = result["policies"]
     assert result["batch"] == 20 and 0 < policy["batch_ms_per_decision"] < policy["batch_ms_median"]
+    assert policy["candidates"] == 3
     result = bench("evaluate", "--policy", "heuristic", "--canyons", "val:1000-1001", "--time-limit", "1",
                    "--workers", "1")
     assert result["same_runs"] and result["decisions"] == 2 * 4 and result["sequential_s"] > 0

@@ -260,6 +260,10 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     assert policy.values(frame).shape == (3, 3, 26)
     switching = make_policy(str(out), selection=Selection(rule="discounted_nearest_bin", switch=True))
     assert switching.values(frame).shape == (15, 3, 26) and switching.act({"image": frame}) in ACTIONS
+    from depthq.bench.policy import bench_policy
+
+    timed = bench_policy([str(out)], decisions=2, batches=0, threads=1, switch=True)["policies"][0]
+    assert timed["candidates"] == 15 and timed["ms_median"] > 0  # the largest candidate set, timed
     assert switching.last_values.shape == (3, 26)  # what Fig. 4 draws: each held action at t+1
 
     config = EvalConfig(canyons=parse_canyon_set("val:1000"), time_limit_s=3.0)

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import torch
 
+from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
 from depthq.control.qnet_policy import QNetPolicy
 from depthq.control.registry import make_policy
@@ -26,12 +27,14 @@ def bench_policy(
     device: str = "auto",
     batches: int | None = None,
     threads: int | None = None,
+    switch: bool = False,
 ) -> dict:
     """Median and 90th-percentile ms per decision on real rendered frames, for each policy in `specs`
     (checkpoint folders or 'onnx:PATH'), taken in turns on the same frames so they compare fairly;
     then, for a `BatchPolicy`, `batches` calls of `act_batch` on BATCH frames (None: as many decisions
     as `decisions`, at least one call): ms per call and per decision in it. `threads`: torch's (None:
-    this process's cores; an evaluation worker has one).
+    this process's cores; an evaluation worker has one). `switch`: a lookahead Depth-Q-Net also scores
+    the sequences that switch action once, its largest candidate set.
 
     Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
@@ -40,7 +43,7 @@ def bench_policy(
     torch.set_num_threads(threads or cores())
     batches = max(1, decisions // BATCH) if batches is None else batches
     if specs:
-        policies = [make_policy(spec, device=where) for spec in specs]
+        policies = [make_policy(spec, device=where, selection=Selection(switch=switch)) for spec in specs]
     else:
         trunk = build_trunk(DEFAULT_TRUNK)
         head = build_head(HeadConfig("depth", trunk.feature_dim))
@@ -78,6 +81,7 @@ def bench_policy(
         "policies": [
             {
                 "policy": policy.name,
+                "candidates": len(policy.candidates),  # actions, or sequences of a lookahead net
                 "ms_median": round(float(np.median(ms)), 2),
                 "ms_p90": round(float(np.percentile(ms, 90)), 2),
                 **_batch_figures(batch_ms),

@@ -36,6 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      "(default: --decisions / 20, at least 1)")
     pol.add_argument("--threads", type=int, default=None,
                      help="torch threads (default: this process's cores; an evaluation worker has 1)")
+    pol.add_argument("--switch", action="store_true",
+                     help="a lookahead Depth-Q-Net also scores sequences that switch action once: its "
+                     "largest candidate set (docs/design.md#lookahead-selection)")
     ev = sub.add_parser("evaluate", help="one policy in 20 canyons, one canyon at a time vs lock-step")
     ev.add_argument("--policy", required=True, help="'heuristic', a checkpoint folder or onnx:PATH")
     ev.add_argument("--canyons", default="val:1000-1019",
@@ -113,9 +116,9 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--threads", args.threads)
     from depthq.bench.policy import bench_policy  # torch, mujoco: off the CLI's startup
 
-    r = bench_policy(args.policy, args.decisions, args.device, args.batches, args.threads)
-    each = [f"{p['policy']}: {p['ms_median']} ms median ({p['ms_p90']} ms p90)" + _in_batch(p, r["batch"])
-            for p in r["policies"]]
+    r = bench_policy(args.policy, args.decisions, args.device, args.batches, args.threads, args.switch)
+    each = [f"{p['policy']} ({p['candidates']} candidates): {p['ms_median']} ms median ({p['ms_p90']} ms p90)"
+            + _in_batch(p, r["batch"]) for p in r["policies"]]
     return r, "per decision: " + "; ".join(each) + f" ({r['threads']} threads)"
 
 
