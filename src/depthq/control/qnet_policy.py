@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.configio import to_dict
-from depthq.control.action_selection import ACTIONS, Selection, candidate_sequences, select_action
+from depthq.control.action_selection import ACTIONS, Selection
+from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_stem
@@ -27,7 +27,7 @@ from depthq.nets.trunk import preprocess
 BATCH_FRAMES = 8
 
 
-class QNetPolicy:
+class QNetPolicy(GreedyPolicy):
     """Greedy policy of a Q-net. `last_values` holds the latest per-action predictions (for Fig. 4):
     (N, n_bins) depth bins for Depth-Q-Net (a lookahead one's: step t+1 of each action held), (N,)
     collision probabilities for Coll-Q-Net. `selection`: how a Depth-Q-Net scores its candidates."""
@@ -50,20 +50,12 @@ class QNetPolicy:
             raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
         self.device = torch.device(device)
         self.net = net.to(self.device).eval()
-        self.kind = kind
-        self.actions = np.asarray(actions, np.float64)
-        self.selection = selection or Selection()
-        self.lookahead = net.head.config.lookahead
-        # The candidates scored per frame: the actions, or a lookahead net's sequences (N, K).
-        self.candidates = (self.actions if self.lookahead == 1
-                           else candidate_sequences(self.actions, self.lookahead, self.selection.switch))
+        self._set_candidates(kind, actions, net.head.config.lookahead, selection)
         self._actions_t = torch.tensor(self.candidates, dtype=torch.float32, device=self.device)
         self.input_size = input_size
         self.name = name
         self.source = source
         self.weights = weights
-        self.last_values: np.ndarray | None = None
-        self.last_batch_values: list[np.ndarray] | None = None
 
     @classmethod
     def from_checkpoint(
@@ -91,9 +83,6 @@ class QNetPolicy:
             selection=selection,
         )
 
-    def reset(self, seed: int | None = None) -> None:
-        """Stateless between frames."""
-
     @torch.inference_mode()
     def values(self, image: np.ndarray) -> np.ndarray:
         """Per-candidate predictions for one uint8 frame (H, W, 3): (N, n_bins), (N, K, n_bins) or (N,)."""
@@ -112,26 +101,11 @@ class QNetPolicy:
         out = self.net.q_values(feature, self._actions_t)
         return (probability(out) if self.kind == "coll" else out).cpu().numpy()
 
-    def choose(self, values: np.ndarray) -> float:
-        """The action one frame's `values` select (every path that acts calls this)."""
-        return select_action(self.kind, values, self.candidates, self.selection)
-
-    def shown(self, values: np.ndarray) -> np.ndarray:
-        """What `last_values` keeps of one frame's `values`: per action, its prediction at t+1."""
-        return values if self.lookahead == 1 else values[: len(self.actions), 0]
-
-    def act(self, obs: Observation) -> float:
-        values = self.values(obs["image"])
-        self.last_values = self.shown(values)
-        return self.choose(values)
-
     def act_batch(self, observations: Sequence[Observation]) -> list[float]:
         """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, the head per
         frame; `last_batch_values` holds what `last_values` would hold for each."""
         features = self.features([obs["image"] for obs in observations])
-        values = [self.candidate_values(feature) for feature in features]
-        self.last_batch_values = [self.shown(v) for v in values]
-        return [self.choose(v) for v in values]
+        return self.act_on([self.candidate_values(feature) for feature in features])
 
     def describe(self) -> dict[str, Any]:
         return {
@@ -141,7 +115,5 @@ class QNetPolicy:
             "weights": self.weights,
             "actions": self.actions.tolist(),
             "input_size": self.input_size,
-            # A one-step net's description stays as it was; a lookahead net's says how it selects.
-            **({} if self.lookahead == 1
-               else {"lookahead": self.lookahead, "selection": to_dict(self.selection)}),
+            **self.selection_record(),
         }
