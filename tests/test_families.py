@@ -178,3 +178,25 @@ def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_pat
     checkpoint = train(settings, tmp_path / "ckpt", progress=False)
     assert default_canyons(str(checkpoint)) == "hard/eval"
     assert default_canyons("heuristic") == "eval"
+
+
+def test_fresh_streams_are_test_sets_no_project_code_draws_from(tmp_path):
+    """`stream7:0-19`: canyons of a stream no dataset, choice or table uses, in either family,
+    disjoint from train/val/eval; a stream that aliases one of those, or is unknown, is refused by name."""
+    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+
+    assert parse_canyon_set("hard/stream7:0-1") == ("hard/stream7:0", "hard/stream7:1")
+    assert parse_canyon_set("stream3:4,2") == ("stream3:4", "stream3:2")
+    fresh = {_hash(generate_canyon(CanyonId("stream7", i, f))) for f in FAMILIES for i in range(20)}
+    known = {_hash(generate_canyon(c)) for f in FAMILIES for c in eval_canyon_ids(f)}
+    known |= {_hash(generate_canyon(CanyonId(s, i, f))) for f in FAMILIES for s in ("train", "val")
+              for i in range(20)}
+    assert len(fresh) == 2 * 20 and not fresh & known
+    for bad in ("stream2:0", "stream:0", "streamx:0", "test:0"):
+        with pytest.raises(ConfigError, match=repr(bad.partition(":")[0])):
+            CanyonId.parse(bad)
+    with pytest.raises(ConfigError, match="stream7"):
+        parse_canyon_set("hard/stream7")  # a fresh stream has no default set: name its indices
+    result = evaluate("heuristic", tmp_path, EvalConfig(canyons=("hard/stream7:0",), time_limit_s=2.0),
+                      workers=1, progress=False)
+    assert [r["canyon"] for r in result["runs"]] == ["hard/stream7:0"] and result["runs"][0]["steps"] > 0

@@ -35,6 +35,7 @@ from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import (
     FAMILIES,
+    FRESH,
     N_EVAL_CANYONS,
     PAPER,
     CanyonId,
@@ -125,14 +126,16 @@ def default_canyons(policy_spec: str) -> str:
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:
     """'eval' (all 20), 'eval:0-4' (a range), 'eval:2,7' (a list) or a range of `val` canyons
-    ('val:1000-1019'; design choices are made there, the `eval` canyons are the test set); a family
-    other than the paper's in front: 'hard/eval', 'hard/val:1000-1019'."""
+    ('val:1000-1019'; design choices are made there, the `eval` canyons are the test set) or of a
+    fresh stream that no project code uses ('stream7:0-19'); a family other than the paper's in
+    front: 'hard/eval', 'hard/val:1000-1019'."""
     family, rest = split_family(text)
     stream, _, which = rest.partition(":")
-    if stream not in ("eval", "val") or (stream == "val" and not which):
+    fresh = stream.startswith(FRESH)
+    if (stream not in ("eval", "val") and not fresh) or (stream != "eval" and not which):
         raise ConfigError(
-            f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7' or 'val:1000-1019', "
-            "optionally after a family, e.g. 'hard/val:1000-1019'"
+            f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7', 'val:1000-1019' "
+            f"or '{FRESH}7:0-19', optionally after a family, e.g. 'hard/val:1000-1019'"
         )
     if not which:
         return tuple(str(c) for c in eval_canyon_ids(family))

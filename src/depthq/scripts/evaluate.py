@@ -27,8 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="'heuristic', 'ou', a checkpoint folder or 'onnx:PATH'")
     p.add_argument(
         "--canyons", default=None,
-        help="'eval' (all 20), 'eval:0-4', 'eval:2,7' or 'val:1000-1019'; another canyon family in front: "
-        "'hard/eval', 'hard/val:1000-1019' (default: the eval canyons of a checkpoint's canyon family)",
+        help="'eval' (all 20), 'eval:0-4', 'eval:2,7', 'val:1000-1019' or a fresh stream no project code "
+        "uses, 'stream7:0-19'; another canyon family in front: 'hard/eval', 'hard/val:1000-1019' "
+        "(default: the eval canyons of a checkpoint's canyon family)",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)

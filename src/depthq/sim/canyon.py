@@ -31,6 +31,7 @@ from depthq.errors import ConfigError
 
 CANYON_ENTROPY = 20_190_506  # fixed: the canyons are part of the benchmark, not of a run's seed
 STREAMS: dict[str, int] = {"train": 0, "val": 1, "eval": 2}
+FRESH = "stream"  # 'stream7:0-19': a stream no project code draws from (ids from len(STREAMS) on)
 N_EVAL_CANYONS = 20
 PAPER = "paper"
 
@@ -97,8 +98,7 @@ class CanyonId:
     def __post_init__(self) -> None:
         if self.family not in FAMILIES:
             raise ConfigError(f"unknown canyon family {self.family!r}; expected one of {sorted(FAMILIES)}")
-        if self.stream not in STREAMS:
-            raise ConfigError(f"unknown canyon stream {self.stream!r}; expected one of {sorted(STREAMS)}")
+        stream_id(self.stream)  # a ConfigError naming the stream if it is unknown
         if not isinstance(self.index, int | np.integer) or self.index < 0:
             raise ConfigError(f"canyon index must be a non-negative integer, got {self.index!r}")
         if self.stream == "eval" and self.index >= N_EVAL_CANYONS:
@@ -121,7 +121,7 @@ class CanyonId:
 
     @property
     def seed_sequence(self) -> np.random.SeedSequence:
-        key = (STREAMS[self.stream], int(self.index))
+        key = (stream_id(self.stream), int(self.index))
         if self.family != PAPER:
             key += (FAMILIES[self.family].key,)
         return np.random.SeedSequence(CANYON_ENTROPY, spawn_key=key)
@@ -129,8 +129,23 @@ class CanyonId:
     @property
     def appearance_seed(self) -> list[int]:
         """Seed of the canyon's randomised look (wall and ground colours, sun), apart from its walls."""
-        seed = [CANYON_ENTROPY, STREAMS[self.stream], int(self.index), 1]
+        seed = [CANYON_ENTROPY, stream_id(self.stream), int(self.index), 1]
         return seed if self.family == PAPER else [*seed, FAMILIES[self.family].key]
+
+
+def stream_id(stream: str) -> int:
+    """A stream's word in the spawn key: train 0, val 1, eval 2, or N for a fresh stream 'streamN'
+    (N >= 3). No project code draws from a fresh stream, so its canyons are a test set that no
+    dataset, design choice or published table has seen (docs/design.md#canyons)."""
+    if stream in STREAMS:
+        return STREAMS[stream]
+    number = stream.removeprefix(FRESH)
+    if stream.startswith(FRESH) and number.isdigit() and int(number) >= len(STREAMS):
+        return int(number)
+    raise ConfigError(
+        f"unknown canyon stream {stream!r}; expected one of {sorted(STREAMS)} or a fresh stream "
+        f"'{FRESH}N' with N >= {len(STREAMS)} (e.g. '{FRESH}7')"
+    )
 
 
 def split_family(text: str) -> tuple[str, str]:
