@@ -82,7 +82,7 @@ def test_a_batched_decision_is_one_frame_decisions_to_the_bit() -> None:
         for obs in observations:
             alone.append(policy.act(obs))
             values.append(policy.last_values)
-        assert policy.act_batch(observations) == alone  # two trunk calls, the head per frame
+        assert policy.act_batch(observations) == alone  # two trunk calls, one head call
         assert all(map(np.array_equal, policy.last_batch_values, values))
         assert policy.act_batch(observations[5:7]) == alone[5:7]  # whichever frames share the call
         assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))

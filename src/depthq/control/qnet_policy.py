@@ -22,9 +22,14 @@ from depthq.nets.trunk import preprocess
 
 # Frames per trunk call in `act_batch`, whose values must be one-frame calls' to the bit (`BatchPolicy`,
 # docs/design.md#lockstep). On the reference CPU (torch 2.13, one thread) the trunk gives every frame
-# batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel); the head
-# differs from 4 rows on (another sgemm kernel), so it runs per frame, on that frame's candidates.
+# batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel).
 BATCH_FRAMES = 8
+# The head's rows (frame, candidate) per call are padded to a multiple of HEAD_ROWS. On the reference
+# CPU a row's values then depend on that row alone, whatever the call's size and the row's place in it
+# (measured for 4 … 1024 rows, both heads, lookahead 1 and 5): below 4 rows, and at some sizes that are
+# not multiples of 4, sgemm takes other kernels with other last bits. So one frame's 3 candidates and
+# a lock-step batch of 20 frames' 60 give the same values, and the head runs once per batch.
+HEAD_ROWS = 4
 
 
 class QNetPolicy(GreedyPolicy):
@@ -86,7 +91,7 @@ class QNetPolicy(GreedyPolicy):
     @torch.inference_mode()
     def values(self, image: np.ndarray) -> np.ndarray:
         """Per-candidate predictions for one uint8 frame (H, W, 3): (N, n_bins), (N, K, n_bins) or (N,)."""
-        return self.candidate_values(self.features([image])[0])
+        return self.candidate_values(self.features([image]))[0]
 
     @torch.inference_mode()
     def features(self, images: Sequence[np.ndarray]) -> torch.Tensor:
@@ -96,16 +101,25 @@ class QNetPolicy(GreedyPolicy):
         return torch.cat([self.net.trunk(chunk) for chunk in frames.tensor_split(calls)])
 
     @torch.inference_mode()
-    def candidate_values(self, feature: torch.Tensor) -> np.ndarray:
-        """`values` from one frame's feature (D,): the head on all its candidates in one call."""
-        out = self.net.q_values(feature, self._actions_t)
-        return (probability(out) if self.kind == "coll" else out).cpu().numpy()
+    def candidate_values(self, features: torch.Tensor) -> np.ndarray:
+        """`values` of F frames' features (F, D), (F, N, …): the head on every (frame, candidate) row
+        in one call, padded to a multiple of HEAD_ROWS rows so that each row's bits are its own."""
+        n = len(self._actions_t)
+        rows = features.repeat_interleave(n, dim=0)
+        actions = self._actions_t.repeat(len(features), *([1] * (self._actions_t.ndim - 1)))
+        if pad := -len(rows) % HEAD_ROWS:
+            rows = torch.cat([rows, rows[-1:].expand(pad, -1)])
+            actions = torch.cat([actions, actions[-1:].expand(pad, *actions.shape[1:])])
+        out = self.net.head(rows, actions)[: len(features) * n]
+        out = out.reshape(len(features), n, *out.shape[1:])
+        if self.kind == "coll":  # per frame: a vectorised sigmoid's tail elements take a scalar path
+            out = torch.stack([probability(logits) for logits in out])
+        return out.cpu().numpy()
 
     def act_batch(self, observations: Sequence[Observation]) -> list[float]:
-        """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, the head per
-        frame; `last_batch_values` holds what `last_values` would hold for each."""
-        features = self.features([obs["image"] for obs in observations])
-        return self.act_on([self.candidate_values(feature) for feature in features])
+        """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, one head pass
+        over all their candidates; `last_batch_values` holds what `last_values` would hold for each."""
+        return self.act_on(list(self.candidate_values(self.features([obs["image"] for obs in observations]))))
 
     def describe(self) -> dict[str, Any]:
         return {

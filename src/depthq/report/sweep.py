@@ -83,6 +83,9 @@ class Sweep:
         parse_canyon_set(self.canyons)  # a clear error for a bad --canyons, before any work
         if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > self.runs:
             raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} (its runs)")
+        if list(self.subsets) != sorted(self.subsets):  # the tables' rows: nested, smallest first
+            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be increasing, e.g. "
+                              f"{','.join(map(str, sorted(set(self.subsets))))}")
         if not self.seeds or min(self.seeds) < 0:
             raise ConfigError(f"sweep {self.name}: needs seeds >= 0, got {self.seeds}")
         if not self.nets or set(self.nets) - set(NETS):
