@@ -160,3 +160,23 @@ def test_probe_runs_every_part_end_to_end(tmp_path, capsys):
     result = read_json(out / "probe.json")
     assert result["stats"][0]["runs"] == 4 and result["oracle"][0]["canyons"] == "val:1000"
     assert result["dqn"]["4"]["runs"] == 1 and (out / "hz4" / "depth_n3" / "best.safetensors").is_file()
+
+
+def test_fig5_draws_a_sweep_whose_only_variant_is_not_the_preset(tmp_path):
+    """`--set lookahead=3` alone: its models' folders carry the setting, and Fig. 5 reads them
+    (it once looked for the preset's folder names and drew empty axes)."""
+    from dataclasses import replace
+
+    from depthq.report.figures import plot_fig5
+    from depthq.report.sweep import parse_setting
+
+    sweep = replace(get_preset("smoke"), nets=("depth",), grid=(parse_setting("lookahead=3"),))
+    plot_fig5(tmp_path, sweep, tmp_path / "empty.png")
+    for model in sweep.models():
+        assert model.name.endswith("_lookahead3")
+        folder = tmp_path / "models" / model.name
+        folder.mkdir(parents=True)
+        rows = "".join(f"{e},{1 / e},{2 / e},{0.1 / e},1.0\n" for e in range(1, 6))
+        (folder / "metrics.csv").write_text("epoch,train_loss,val_loss,val_loss_std,seconds\n" + rows)
+    plot_fig5(tmp_path, sweep, tmp_path / "drawn.png")
+    assert (tmp_path / "drawn.png").read_bytes() != (tmp_path / "empty.png").read_bytes()

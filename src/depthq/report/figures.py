@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.report.sweep import Model, Sweep, variant_label
+from depthq.report.sweep import Sweep, variant_label
 from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results, interval, per_seed
 
 
@@ -29,13 +29,14 @@ def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
     fig, axes = plt.subplots(2, len(sweep.nets), figsize=(6 * len(sweep.nets), 7), sharex=True, squeeze=False)
     colours = plt.cm.viridis(np.linspace(0, 0.9, len(sweep.subsets)))
     first = sweep.variants()[0]
+    folders = {(m.net, m.runs, m.seed): m.name for m in sweep.models() if m.variant == first}
     for column, net in enumerate(sweep.nets):
         loss_ax, std_ax = axes[0, column], axes[1, column]
         for colour, n in zip(colours, sweep.subsets, strict=True):
             logs = [
                 _read_metrics(p)
                 for s in sweep.seeds
-                if (p := out / "models" / Model(net, n, s, first).name / "metrics.csv").is_file()
+                if (p := out / "models" / folders[net, n, s] / "metrics.csv").is_file()
             ]
             logs = [m for m in logs if m]
             if not logs:
@@ -51,11 +52,13 @@ def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
         unit = "L1 on valid bins (m)" if net == "depth" else "cross-entropy"
         loss_ax.set_title(f"{NET_LABELS[net]}: {unit}" + (f" ({variant_label(first)})" if first else ""))
         loss_ax.set_ylabel("loss")
-        loss_ax.legend(fontsize=7, ncol=2)
+        if loss_ax.lines:  # none when no model of this network has a training log yet
+            loss_ax.legend(fontsize=7, ncol=2)
         std_ax.set_title(f"{NET_LABELS[net]}: std of the validation loss over a batch")
         std_ax.set_xlabel("epoch (100 training batches of 64)")
         std_ax.set_ylabel("std")
-        std_ax.legend(fontsize=7, ncol=2)
+        if std_ax.lines:
+            std_ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -82,7 +85,7 @@ def plot_success_vs_runs(out: Path, sweep: Sweep, path: Path) -> None:
                 low.append(np.mean(succ) - ci[0])
                 high.append(ci[1] - np.mean(succ))
         if xs:
-            label = NET_LABELS[net] + (f", {variant_label(variant)}" if len(variants) > 1 else "")
+            label = NET_LABELS[net] + (f", {variant_label(variant)}" if variant else "")
             ax.errorbar(xs, mean, yerr=[low, high], fmt="osv^DP"[k % 6] + "-", capsize=3, color=colours[net],
                         alpha=1.0 - 0.5 * k / len(variants), label=label)
     for net in sweep.nets:

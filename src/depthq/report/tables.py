@@ -73,10 +73,11 @@ def _circling(runs: list[dict[str, Any]]) -> float:
 
 
 def _groups(sweep: Sweep) -> list[tuple[Variant, int, dict[str, str]]]:
-    """(variant, size, the row's first cells): one table row each."""
-    many = len(sweep.variants()) > 1
+    """(variant, size, the row's first cells): one table row each. A sweep with settings (`--set`)
+    names them in every row, even a single one: the table must say what it measured."""
+    named = bool(sweep.grid)
     return [
-        (variant, n, ({"variant": variant_label(variant)} if many else {}) | {"runs": str(n)})
+        (variant, n, ({"variant": variant_label(variant)} if named else {}) | {"runs": str(n)})
         for variant in sweep.variants()
         for n in sweep.subsets
     ]
