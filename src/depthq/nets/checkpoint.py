@@ -11,7 +11,9 @@ config.json (format version 3):
     provenance               the package and version that wrote it
     train                    the full TrainConfig (`select`: the weights a policy uses by default;
                              `snapshots`: epochs whose weights are kept as well; `lookahead`: the
-                             steps a Depth-Q-Net predicts, also in `head`)
+                             steps a Depth-Q-Net predicts, also in `head`;
+                             `feature_projection`: the size the feature is projected to, also
+                             in `head`, its map stored with the head's weights)
     head, trunk, trunk_frozen, input_size, learning_rate
                              the network, rebuilt from these
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
@@ -29,7 +31,8 @@ load, with a warning that they cannot be verified.
 
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
-Depth-Q-Net (lookahead 1). A newer version is refused by name.
+Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0). A newer
+version is refused by name.
 """
 
 from __future__ import annotations
@@ -69,8 +72,8 @@ _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, t
 _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
 # TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
-# there was (a one-step Depth-Q-Net), so such a folder still loads and resumes.
-_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0}
+# there was (a one-step Depth-Q-Net, its feature unprojected), so such a folder still loads and resumes.
+_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0}
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,12 @@ stable BCE-with-logits; `probability` turns logits into P(collision within H).
 A Depth-Q-Net head that looks `lookahead` = K steps ahead (docs/design.md#lookahead) appends the K
 actions of a sequence and ends in FC K·26: the bins at t+1 … t+K, (B, K, 26). K = 1 is the one-step
 head, with the same parameters, initialisation and (B, 26) output.
+
+A head with `feature_projection` = P > 0 first maps the D-d trunk feature to P numbers by a fixed
+linear map (docs/design.md#heads): the top-P principal directions of the training features
+(`pca_projection`), held as buffers, so the optimizer never sees them while checkpoints, policies and
+the ONNX graph carry them. P = 0 is the head without it: the same parameters, initialisation, state
+dict and outputs.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -25,6 +32,7 @@ from depthq.nets.trunk import Trunk
 HeadKind = Literal["depth", "coll"]
 HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
 COLL_HIDDEN = 25
+_PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
 
 
 def _positive_int(value: object) -> bool:
@@ -42,6 +50,7 @@ class HeadConfig:
     dropout: float = 0.5
     action_scale: float = 1.0  # the action enters the hidden layer as action_scale · a
     lookahead: int = 1  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
+    feature_projection: int = 0  # P > 0: the feature projected to P numbers first; 0: none
 
     def __post_init__(self) -> None:
         if self.kind not in HEAD_KINDS:
@@ -59,16 +68,66 @@ class HeadConfig:
             raise ConfigError(
                 f"HeadConfig.lookahead: a Coll-Q-Net head takes one action, got {self.lookahead!r}"
             )
+        p = self.feature_projection
+        if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p <= self.feature_dim:
+            raise ConfigError(
+                f"HeadConfig.feature_projection must be an integer in 0..{self.feature_dim} "
+                f"(0: none), got {p!r}"
+            )
+
+    @property
+    def input_dim(self) -> int:
+        """What the hidden layer takes: the (projected) feature and the action(s)."""
+        return (self.feature_projection or self.feature_dim) + self.lookahead
+
+
+def pca_projection(features: np.ndarray, size: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The projection onto the top-`size` principal directions of `features` (N, D): weight W
+    (size, D) and bias −W·mean (size,), float32, largest variance first.
+
+    Fitted in float64 on the centred features, the covariance summed block by block in a fixed
+    order; each direction's sign makes its largest-magnitude component positive, so the same
+    features give the same bits (a resumed training's refit equals its stored one).
+    """
+    n, dim = features.shape
+    if not 1 <= size <= dim or n < 2:
+        raise ConfigError(f"pca_projection: {size} directions of {n} features of size {dim}")
+    blocks = range(0, n, _PCA_CHUNK)
+    mean = sum(features[i : i + _PCA_CHUNK].astype(np.float64).sum(axis=0) for i in blocks) / n
+    covariance = np.zeros((dim, dim))
+    for i in blocks:
+        centred = features[i : i + _PCA_CHUNK].astype(np.float64) - mean
+        covariance += centred.T @ centred
+    _, vectors = np.linalg.eigh(covariance / (n - 1))  # eigenvalues ascending
+    top = vectors[:, ::-1][:, :size].T
+    top *= np.sign(top[np.arange(size), np.abs(top).argmax(axis=1)])[:, None]
+    weight, bias = np.ascontiguousarray(top, dtype=np.float32), (-(top @ mean)).astype(np.float32)
+    return torch.from_numpy(weight), torch.from_numpy(bias)
+
+
+class Projection(nn.Module):
+    """feature ↦ W·feature + b, fixed: buffers, not parameters (zero until fitted or loaded)."""
+
+    def __init__(self, feature_dim: int, size: int) -> None:
+        super().__init__()
+        self.register_buffer("weight", torch.zeros(size, feature_dim))
+        self.register_buffer("bias", torch.zeros(size))
+
+    def forward(self, feature: torch.Tensor) -> torch.Tensor:
+        return F.linear(feature, self.weight, self.bias)
 
 
 class Head(nn.Module):
-    """The part both heads share: dropout(feature) ⊕ action(s) → FC hidden + ReLU."""
+    """The part both heads share: dropout(feature) ⊕ action(s) → FC hidden + ReLU (the feature
+    projected first when `feature_projection` > 0)."""
 
     def __init__(self, config: HeadConfig, output: nn.Module) -> None:
         super().__init__()
         self.config = config
         self.dropout = nn.Dropout(config.dropout)
-        self.hidden = nn.Linear(config.feature_dim + config.lookahead, config.hidden)
+        self.projection = (Projection(config.feature_dim, config.feature_projection)
+                           if config.feature_projection else None)
+        self.hidden = nn.Linear(config.input_dim, config.hidden)
         self.output = output
         for module in self.modules():
             if isinstance(module, nn.Linear):  # Glorot init, as in the paper's TensorFlow code
@@ -87,7 +146,18 @@ class Head(nn.Module):
         action = action.reshape(-1, k).to(feature.dtype) * self.config.action_scale
         if action.shape[0] != feature.shape[0]:
             raise ConfigError(f"head: {feature.shape[0]} features but {action.shape[0]} actions")
+        if self.projection is not None:
+            feature = self.projection(feature)
         return F.relu(self.hidden(torch.cat([self.dropout(feature), action], dim=1)))
+
+    @torch.no_grad()
+    def fit_projection(self, features: np.ndarray) -> None:
+        """Set the projection to `pca_projection` of `features` (N, D): the training split's."""
+        if self.projection is None:
+            raise ConfigError("fit_projection: this head has no feature projection (feature_projection=0)")
+        weight, bias = pca_projection(features, self.config.feature_projection)
+        self.projection.weight.copy_(weight)
+        self.projection.bias.copy_(bias)
 
 
 class DepthHead(Head):

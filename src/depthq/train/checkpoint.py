@@ -4,8 +4,9 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
 
     config.json              what was trained, on which data, for which policy (`depthq.nets.checkpoint`,
                              which owns the format: this file and the weight files, version, digests)
-    best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*"),
-    last.safetensors         and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
+    best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*",
+    last.safetensors         its fitted feature projection's buffers "head.projection.*" included),
+                             and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
                              stored, it is rebuilt from the package's pretrained weights
     epoch_0040.safetensors   the weights after an epoch of `TrainConfig.snapshots` (kept on resume)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise)
@@ -73,11 +74,12 @@ class TrainState:
 def head_config(config: TrainConfig) -> HeadConfig:
     feature_dim = TRUNKS[config.trunk].feature_dim
     return HeadConfig(config.model, feature_dim, dropout=config.dropout, action_scale=config.action_scale,
-                      lookahead=config.lookahead)
+                      lookahead=config.lookahead, feature_projection=config.feature_projection)
 
 
 def build_qnet(config: TrainConfig) -> QNet:
-    """The network `config` trains: its trunk (pretrained if it has weights) and a fresh head."""
+    """The network `config` trains: its trunk (pretrained if it has weights) and a fresh head (its
+    feature projection, if any, not fitted yet: `depthq.train.trainer` fits it)."""
     return QNet(build_trunk(config.trunk), build_head(head_config(config)))
 
 

@@ -80,6 +80,11 @@ class TrainConfig:
     # Weight of lookahead step k in the loss: lookahead_discount ** (k − 1). 1 weighs every step alike
     # (each is a measured frame, and the selection rule's minimum over the steps needs them all).
     lookahead_discount: float = 1.0
+    # P > 0 projects the frozen trunk's feature to P numbers before the head (docs/design.md#heads): a
+    # fixed linear map, the top-P principal directions of this training's training features, fitted
+    # when it starts. The paper's head took 256 (257 → 4096 with the action), ours 1280: 5× the first
+    # layer's arithmetic. 0 (the default until measured on val canyons): no projection.
+    feature_projection: int = 0
     # Labels (`depthq.data.labels`); the defaults are the original's.
     horizon: int = HORIZON
     min_frames: int = MIN_FRAMES
@@ -132,12 +137,27 @@ class TrainConfig:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
         if self.trunk not in TRUNKS:
             raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
+        self._check_projection()
         if self.depth_loss not in DEPTH_LOSSES:
             raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
         if self.select not in SELECT:
             raise ConfigError(f"train.select must be one of {SELECT}, got {self.select!r}")
         self._check_snapshots()
         self.labels()  # checks the label fields
+
+    def _check_projection(self) -> None:
+        _int_at_least("feature_projection", self.feature_projection, 0)
+        p, trunk = self.feature_projection, TRUNKS[self.trunk]
+        if p and not trunk.frozen:
+            raise ConfigError(
+                f"train.feature_projection {p}: only a frozen trunk's cached features are projected, but "
+                f"trunk {self.trunk!r} is trained with the head; use 0"
+            )
+        if p > trunk.feature_dim:
+            raise ConfigError(
+                f"train.feature_projection must be in 1..{trunk.feature_dim} (trunk {self.trunk!r}'s "
+                f"feature size) or 0, got {p}"
+            )
 
     def _check_snapshots(self) -> None:
         if not isinstance(self.snapshots, tuple):

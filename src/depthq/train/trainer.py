@@ -72,6 +72,10 @@ def train(
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
     val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
     state = checkpoint.load_state(out, model, optimizer, rng)
+    if config.feature_projection and not state.epoch:  # a resumed training's is in its checkpoint
+        # On the training samples' cached features (a frozen trunk's: TrainConfig allows no other),
+        # never the validation split's.
+        model.head.fit_projection(train_set.features.numpy())
 
     tb = SummaryWriter(out / "tb", purge_step=state.epoch + 1)
     bar = tqdm(total=config.epochs, initial=state.epoch, desc=f"train {config.model}", unit="epoch",
