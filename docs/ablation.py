@@ -67,6 +67,9 @@ RUNGS = (
     Rung("Depth-Q-Net lookahead 3", ("lookahead=3",), nets=("depth",)),
     Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",)),
     Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0),
+    # Beyond the paper (docs/design.md#heads): the paper-size head, a fixed PCA of the feature to 256
+    # numbers (the paper's 257 → 4096 first layer), kept only if it drives as well as ours.
+    Rung("paper-size head (PCA to 256)", ("feature_projection=256",)),
 )
 
 
