@@ -25,10 +25,11 @@ from depthq.nets.trunk import preprocess
 # batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel).
 BATCH_FRAMES = 8
 # The head's rows (frame, candidate) per call are padded to a multiple of HEAD_ROWS. On the reference
-# CPU a row's values then depend on that row alone, whatever the call's size and the row's place in it
-# (measured for 4 … 1024 rows, both heads, lookahead 1 and 5): below 4 rows, and at some sizes that are
-# not multiples of 4, sgemm takes other kernels with other last bits. So one frame's 3 candidates and
-# a lock-step batch of 20 frames' 60 give the same values, and the head runs once per batch.
+# CPU a row's values then depend on that row alone, whatever the call's size and the row's place in
+# it (measured for 4 … 1024 rows, both heads, lookahead 1 and 5, feature projection 0, 8, 64, 256):
+# below 4 rows, and at some sizes that are not multiples of 4, sgemm takes other kernels with other
+# last bits. So one frame's 3 candidates and a lock-step batch of 20 frames' 60 give the same values,
+# and the head runs once per batch.
 HEAD_ROWS = 4
 
 
