@@ -125,6 +125,9 @@ def test_a_collision_ends_the_run_and_its_distance_to_collision_is_the_progress(
     to_collision = distance_to_collision(info["progress"], info["end_reason"], info["canyon_length"])
     assert to_collision == info["progress"] < info["canyon_length"]
     assert not run_success("end", 20.0, info["end_reason"]) and run_success("distance", 20.0, "bump")
+    # a run that circles until the time limit hits nothing, but is credited only what it drove
+    assert distance_to_collision(0.7, "time_limit", 24.8) == 0.7
+    assert distance_to_collision(24.9, "end", 24.8) == 24.8
 
 
 def test_collect_in_the_hard_family_records_it(tmp_path):

@@ -18,8 +18,11 @@ def run_success(goal: str, distance: float, end_reason: str) -> bool:
 
 
 def distance_to_collision(progress: float, end_reason: str, canyon_length: float) -> float:
-    """Progress along the canyon up to the first bump or contact; the canyon's length without one."""
-    return progress if end_reason in COLLISIONS else canyon_length
+    """Progress along the canyon up to the first bump or contact, or up to the time limit; the
+    canyon's length only for a run that reached its end. A run that circles or turns back until the
+    time limit collides with nothing but gets no further than its progress: crediting it the
+    canyon's length (as depthq did before 2026-11-23) ranked a circling policy with the expert."""
+    return canyon_length if end_reason == "end" else progress
 
 
 def distance_from_spawn(poses: np.ndarray) -> float:

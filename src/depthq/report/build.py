@@ -25,7 +25,8 @@ from depthq.report.tables import (
 SUCCESS_TEXT = {
     False: "more than 15 m from the spawn",
     True: "the canyon's end reached without a collision; 'to collision': progress along the canyon "
-    "until the first bump or contact (the canyon's length if none), 'closest': the smallest LiDAR-axis "
+    "until the first bump or contact, or the time limit (the canyon's length if it reached the end), "
+    "'closest': the smallest LiDAR-axis "
     "distance to a wall or pillar (docs/hard_canyons.md)",
 }
 

@@ -102,7 +102,7 @@ CLAIMS = [
         "Looking K frames ahead over action sequences (beyond the paper, the paper's own next step) "
         "gives back at 10 Hz what the rate took (paper val canyons: 19/20 looking 1 s ahead, 12/20 one "
         "step ahead); in the hard eval canyons it drives farther than the one-step net (500 runs: "
-        "10.47 vs 9.01 m, 3 seeds) but stays far behind Coll-Q-Net (18.85 m)",
+        "10.47 vs 9.01 m, 3 seeds) but stays far behind Coll-Q-Net (18.47 m)",
         "docs/ablation.md#lookahead-10hz and #lookahead-eval (3 seeds); rungs '10 Hz' and 'lookahead'",
     ),
 ]
