@@ -87,7 +87,8 @@ CLAIMS = [
         "The paper's settings are fair to Coll-Q-Net",
         "Partly: under each setting both networks share (raw action, dropout 0.5, pooled feature, final "
         "weights), one at a time, Coll-Q-Net drives at least as far as Depth-Q-Net; its own learning rate "
-        "(0.01) brings it down to Depth-Q-Net's level within a 40-epoch training (under-trained)",
+        "(0.01) brings it down to Depth-Q-Net's level within a 40-epoch training; with all the paper's "
+        "settings together at 10 Hz neither network drives (one seed)",
         "docs/ablation.md, one rung per setting (val canyons)",
     ),
     (
