@@ -24,13 +24,6 @@ from depthq.nets.trunk import preprocess
 # docs/design.md#lockstep). On the reference CPU (torch 2.13, one thread) the trunk gives every frame
 # batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel).
 BATCH_FRAMES = 8
-# The head's rows (frame, candidate) per call are padded to a multiple of HEAD_ROWS. On the reference
-# CPU a row's values then depend on that row alone, whatever the call's size and the row's place in
-# it (measured for 4 … 1024 rows, both heads, lookahead 1 and 5, feature projection 0, 8, 64, 256):
-# below 4 rows, and at some sizes that are not multiples of 4, sgemm takes other kernels with other
-# last bits. So one frame's 3 candidates and a lock-step batch of 20 frames' 60 give the same values,
-# and the head runs once per batch.
-HEAD_ROWS = 4
 
 
 class QNetPolicy(GreedyPolicy):
@@ -103,16 +96,9 @@ class QNetPolicy(GreedyPolicy):
 
     @torch.inference_mode()
     def candidate_values(self, features: torch.Tensor) -> np.ndarray:
-        """`values` of F frames' features (F, D), (F, N, …): the head on every (frame, candidate) row
-        in one call, padded to a multiple of HEAD_ROWS rows so that each row's bits are its own."""
-        n = len(self._actions_t)
-        rows = features.repeat_interleave(n, dim=0)
-        actions = self._actions_t.repeat(len(features), *([1] * (self._actions_t.ndim - 1)))
-        if pad := -len(rows) % HEAD_ROWS:
-            rows = torch.cat([rows, rows[-1:].expand(pad, -1)])
-            actions = torch.cat([actions, actions[-1:].expand(pad, *actions.shape[1:])])
-        out = self.net.head(rows, actions)[: len(features) * n]
-        out = out.reshape(len(features), n, *out.shape[1:])
+        """`values` of F frames' features (F, D), (F, N, …): one head call over all their candidates
+        (`QNet.candidate_outputs`, whose padding keeps each row's bits its own)."""
+        out = self.net.candidate_outputs(features, self._actions_t)
         if self.kind == "coll":  # per frame: a vectorised sigmoid's tail elements take a scalar path
             out = torch.stack([probability(logits) for logits in out])
         return out.cpu().numpy()

@@ -32,6 +32,13 @@ from depthq.nets.trunk import Trunk
 HeadKind = Literal["depth", "coll"]
 HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
 COLL_HIDDEN = 25
+# `QNet.candidate_outputs` pads its (frame, candidate) rows to a multiple of HEAD_ROWS. On the reference
+# CPU (torch 2.13, one thread) a row's values then depend on that row alone, whatever the call's size
+# and the row's place in it (measured for 4 … 1024 rows, both heads, lookahead 1 and 5, feature
+# projection 0, 8, 64, 256): below 4 rows, and at some sizes that are not multiples of 4, sgemm takes
+# other kernels with other last bits. So one frame's 3 candidates and a lock-step batch of 20 frames'
+# 60 give the same values (docs/design.md#lockstep).
+HEAD_ROWS = 4
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
 
 
@@ -213,17 +220,30 @@ class QNet(nn.Module):
         return self.head(self.trunk(images), actions)
 
     @torch.no_grad()
+    def candidate_outputs(self, features: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
+        """F frames' features (F, D) and N candidates (N,) or sequences (N, K) → the head on every
+        (frame, candidate) row in one call, (F, N, …): depth bins or collision logits. The rows are
+        padded to a multiple of HEAD_ROWS, so each row's bits are its own. Call `.eval()` first."""
+        n = len(candidates)
+        rows = features.repeat_interleave(n, dim=0)
+        actions = candidates.repeat(len(features), *([1] * (candidates.ndim - 1)))
+        if pad := -len(rows) % HEAD_ROWS:
+            rows = torch.cat([rows, rows[-1:].expand(pad, -1)])
+            actions = torch.cat([actions, actions[-1:].expand(pad, *actions.shape[1:])])
+        out = self.head(rows, actions)[: len(features) * n]
+        return out.reshape(len(features), n, *out.shape[1:])
+
+    @torch.no_grad()
     def q_values(self, frame: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """One frame, N candidate actions → (N, n_bins) depth bins or (N,) collision logits; with
         lookahead K > 1, N candidate sequences (N, K) → (N, K, n_bins).
 
         `frame` is an image (1, 3, H, W) in [0, 1] or its feature (1, D) / (D,). The trunk runs once;
-        the head runs on all N candidates in one batch. Call `.eval()` first: dropout would make
-        acting random.
+        the head runs on all N candidates in one batch (`candidate_outputs`). Call `.eval()` first:
+        dropout would make acting random.
         """
         feature = self.trunk(frame) if frame.ndim == 4 else frame.reshape(1, -1)
         if feature.shape[0] != 1:
             raise ConfigError(f"q_values: expected one frame, got a batch of {feature.shape[0]}")
         k = self.head.config.lookahead
-        actions = actions.reshape(-1) if k == 1 else actions.reshape(-1, k)
-        return self.head(feature.expand(actions.shape[0], -1), actions)
+        return self.candidate_outputs(feature, actions.reshape(-1) if k == 1 else actions.reshape(-1, k))[0]
