@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import shutil
 from pathlib import Path
@@ -17,9 +18,11 @@ from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
 from depthq.data.views import DepthView
 from depthq.errors import ConfigError, DataError
+from depthq.flags import config_from_args
 from depthq.nets.checkpoint import load_qnet
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.scripts.train import add_arguments
 from depthq.train.checkpoint import build_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import cache_dir, load_features
@@ -191,6 +194,51 @@ def test_default_learning_rates() -> None:
     assert TrainConfig(model="depth", data="d").learning_rate == 0.1
     assert TrainConfig(model="coll", data="d").learning_rate == 0.1
     assert TrainConfig(model="coll", data="d", lr=0.01).learning_rate == 0.01
+
+
+def test_precision_is_a_validated_flag() -> None:
+    with pytest.raises(ConfigError, match=r"precision.*'fp16'"):
+        TrainConfig(model="depth", data="d", precision="fp16")
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(["--model", "depth", "--data", "d", "--out", "o", "--precision", "bf16"])
+    assert config_from_args(TrainConfig, args).precision == "bf16"
+    assert TrainConfig(model="depth", data="d").precision == "fp32"
+
+
+@pytest.mark.slow
+def test_bf16_training_is_recorded_deterministic_and_its_policy_decides_in_fp32(
+    data: Path, tmp_path: Path
+) -> None:
+    a = train(_config(data, epochs=2, precision="bf16"), tmp_path / "a", progress=False)
+    b = train(_config(data, epochs=2, precision="bf16"), tmp_path / "b", progress=False)
+    fp32 = train(_config(data, epochs=2), tmp_path / "fp32", progress=False)
+    assert read_json(a / "config.json")["train"]["precision"] == "bf16"
+    assert read_json(fp32 / "config.json")["train"]["precision"] == "fp32"
+    weights, again = load_file(a / "last.safetensors"), load_file(b / "last.safetensors")
+    assert all(torch.equal(weights[k], again[k]) for k in weights)  # (the header's key order may differ)
+    reference = load_file(fp32 / "last.safetensors")
+    assert all(t.dtype == torch.float32 for t in weights.values())  # master weights stay float32
+    assert any(not torch.equal(weights[k], reference[k]) for k in weights)  # bf16 did change the arithmetic
+    bf16_val, fp32_val = (float(_metrics(out)[-1]["val_loss"]) for out in (a, fp32))
+    assert bf16_val == pytest.approx(fp32_val, rel=0.1)
+    policy = QNetPolicy.from_checkpoint(a)
+    with Dataset.open(data).reader(Dataset.open(data).entries("val")[0]) as reader:
+        values = policy.values(reader.image(3))
+    assert values.dtype == np.float32 and np.isfinite(values).all()
+
+
+@pytest.mark.slow
+def test_a_checkpoint_older_than_precision_loads_and_resumes_as_fp32(data: Path, tmp_path: Path) -> None:
+    out = train(_config(data, epochs=1), tmp_path / "old", progress=False)
+    record = read_json(out / "config.json")
+    del record["train"]["precision"]  # as written before the field existed
+    (out / "config.json").write_text(json.dumps(record))
+    assert QNetPolicy.from_checkpoint(out).kind == "depth"
+    train(_config(data, epochs=2), out, progress=False)
+    assert read_json(out / "last.json")["epoch"] == 2
+    with pytest.raises(ConfigError, match="precision"):
+        train(_config(data, epochs=3, precision="bf16"), out, progress=False)
 
 
 @pytest.mark.slow

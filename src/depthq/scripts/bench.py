@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     feat.add_argument("--frames", type=int, default=1024)
     tr = sub.add_parser("train", help="head training samples/s and its ratio to matmul FLOP/s (≥ 0.6)")
     tr.add_argument("--seconds", type=float, default=10.0)
+    tr.add_argument("--precision", default="fp32",
+                    help="precisions measured side by side, comma-separated: fp32,bf16 (train --precision)")
+    tr.add_argument("--threads", type=int, default=None, help="torch threads (default: this process's cores)")
     pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
     pol.add_argument(
         "--policy", action="append", default=None,
@@ -92,11 +95,13 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--seconds", args.seconds)
         from depthq.bench.train import bench_train  # torch: off the CLI's startup
 
-        r = bench_train(args.seconds, device=args.device)
-        return r, (
-            f"{r['samples_per_s']} head samples/s, {r['head_gflops']} GFLOP/s = {r['ratio']} × matmul's "
-            f"{r['matmul_gflops']} GFLOP/s"
-        )
+        if args.threads is not None:
+            _positive("--threads", args.threads)
+        precisions = tuple(p.strip() for p in args.precision.split(","))
+        r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads)
+        each = [f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's"
+                + (f" ({name})" if len(precisions) > 1 else "") for name, p in r["precisions"].items()]
+        return r, "; ".join(each) + f" {r['matmul_gflops']} fp32 GFLOP/s ({r['threads']} threads)"
     if args.what == "evaluate":
         _positive("--workers", args.workers)
         from depthq.bench.evaluate import bench_evaluate  # torch, mujoco: off the CLI's startup

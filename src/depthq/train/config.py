@@ -24,6 +24,8 @@ DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # within 8 % of the best of 60 for Depth-Q-Net (0.151 vs 0.139 at 50) and 10 % for Coll-Q-Net (0.058
 # vs 0.053); best.safetensors keeps the best epoch. 40 epochs ≈ 80 s per model on 2 CPU cores.
 DEFAULT_EPOCHS = 40
+# The forward pass's arithmetic in training and validation (docs/benchmarks.md#precision).
+PRECISIONS = ("fp32", "bf16")
 
 
 def _int_at_least(name: str, value: object, low: int) -> None:
@@ -98,6 +100,9 @@ class TrainConfig:
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--which epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
+    # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
+    # gradients, loss and Adadelta stay float32); "fp32": float32 throughout. Policies decide in float32.
+    precision: str = "fp32"
 
     def __post_init__(self) -> None:
         if self.model not in HEAD_KINDS:
@@ -143,6 +148,8 @@ class TrainConfig:
         if self.select not in SELECT:
             raise ConfigError(f"train.select must be one of {SELECT}, got {self.select!r}")
         self._check_snapshots()
+        if self.precision not in PRECISIONS:
+            raise ConfigError(f"train.precision must be one of {PRECISIONS}, got {self.precision!r}")
         self.labels()  # checks the label fields
 
     def _check_projection(self) -> None:

@@ -87,7 +87,7 @@ def train(
             train_losses = []
             for _ in range(config.train_batches):
                 batch = train_set.batch(train_set.draw(config.batch_size, rng)).to(where)
-                train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer))
+                train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer, config.precision))
                 _check_finite(train_losses[-1], "training", epoch, out, state)
 
             model.eval()  # no dropout; a trained trunk's BatchNorm uses its running statistics
@@ -95,7 +95,8 @@ def train(
             with torch.no_grad():
                 for idx in val_batches:
                     batch = val_set.batch(idx).to(where)
-                    loss, per_sample = loss_fn(val_set.predict(model, batch), batch.targets)
+                    pred = predict(model, val_set, batch, config.precision)
+                    loss, per_sample = loss_fn(pred, batch.targets)
                     val_losses.append(loss.item())
                     val_stds.append(per_sample.std().item())
             row = {
@@ -129,9 +130,21 @@ def loss_function(config: TrainConfig) -> LossFn:
     return functools.partial(depth_l1_loss, reduction=config.depth_loss)
 
 
-def train_step(model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, optimizer: Optimizer) -> float:
-    """One Adadelta step on `batch`; returns its loss. A non-finite loss is returned without a step."""
-    loss, _ = loss_fn(samples.predict(model, batch), batch.targets)
+def predict(model: QNet, samples: Samples, batch: Batch, precision: str = "fp32") -> torch.Tensor:
+    """The model's float32 outputs for `batch`; "bf16" runs the forward pass under bfloat16 autocast, and
+    the loss is then taken of its outputs in float32 (elementwise ops in bf16 would round the loss)."""
+    bf16 = precision == "bf16"
+    with torch.autocast(device_type=batch.inputs.device.type, dtype=torch.bfloat16, enabled=bf16):
+        return samples.predict(model, batch).float()
+
+
+def train_step(
+    model: QNet, samples: Samples, batch: Batch, loss_fn: LossFn, optimizer: Optimizer,
+    precision: str = "fp32",
+) -> float:
+    """One Adadelta step on `batch` (`predict`'s `precision`); returns its loss. A non-finite loss is
+    returned without a step."""
+    loss, _ = loss_fn(predict(model, samples, batch, precision), batch.targets)
     value = loss.item()
     if math.isfinite(value):
         optimizer.zero_grad(set_to_none=True)
