@@ -12,6 +12,7 @@ import pytest
 import torch
 from safetensors.torch import load, load_file, save
 
+from depthq.cli import main
 from depthq.configio import read_json
 from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.collect import CollectConfig, collect, exploration_env
@@ -226,6 +227,23 @@ def test_bf16_training_is_recorded_deterministic_and_its_policy_decides_in_fp32(
     with Dataset.open(data).reader(Dataset.open(data).entries("val")[0]) as reader:
         values = policy.values(reader.image(3))
     assert values.dtype == np.float32 and np.isfinite(values).all()
+
+
+@pytest.mark.slow
+def test_benches_measure_each_precision(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    def bench(*args: str) -> dict:
+        assert main(["bench", *args, "--json"]) == 0
+        return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+
+    result = bench("train", "--precision", "fp32,bf16", "--seconds", "1", "--threads", "1")
+    assert list(result["precisions"]) == ["fp32", "bf16"] and result["threads"] == 1
+    assert all(p["samples_per_s"] > 0 for p in result["precisions"].values())
+    assert result["samples_per_s"] == result["precisions"]["fp32"]["samples_per_s"]
+    result = bench("features", "--data", str(data), "--frames", "32", "--precision", "bf16,fp32")
+    assert list(result["precisions"]) == ["bf16", "fp32"]
+    assert all(p["frames"] >= 32 and p["frames_per_s"] > 0 for p in result["precisions"].values())
+    assert main(["bench", "train", "--precision", "fp16", "--seconds", "1"]) == 2
+    assert "fp16" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -32,9 +32,10 @@ def bench_policy(
     """Median and 90th-percentile ms per decision on real rendered frames, for each policy in `specs`
     (checkpoint folders or 'onnx:PATH'), taken in turns on the same frames so they compare fairly;
     then, for a `BatchPolicy`, `batches` calls of `act_batch` on BATCH frames (None: as many decisions
-    as `decisions`, at least one call): ms per call and per decision in it. `threads`: torch's (None:
-    this process's cores; an evaluation worker has one). `switch`: a lookahead Depth-Q-Net also scores
-    the sequences that switch action once, its largest candidate set.
+    as `decisions`, at least one call): ms per call and per decision in it. `threads`: torch's and an
+    ONNX session's (None: this process's cores, onnxruntime's default; an evaluation worker has one).
+    `switch`: a lookahead Depth-Q-Net also scores the sequences that switch action once, its largest
+    candidate set.
 
     Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
@@ -43,7 +44,8 @@ def bench_policy(
     torch.set_num_threads(threads or cores())
     batches = max(1, decisions // BATCH) if batches is None else batches
     if specs:
-        policies = [make_policy(spec, device=where, selection=Selection(switch=switch)) for spec in specs]
+        selection = Selection(switch=switch)
+        policies = [make_policy(spec, device=where, selection=selection, threads=threads) for spec in specs]
     else:
         trunk = build_trunk(DEFAULT_TRUNK)
         head = build_head(HeadConfig("depth", trunk.feature_dim))

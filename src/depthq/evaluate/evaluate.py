@@ -190,7 +190,7 @@ class _EvalWorker:
         self.config, self.video = config, video
         self.make_policy = partial(
             make_policy, policy_spec, seed=config.seed, which=config.which, device=device,
-            selection=config.selection,
+            selection=config.selection, threads=1,  # an ONNX session's, for the same reasons
         )
         self.policy = self.make_policy()
         self.envs, self.expert = [CanyonEnv(config.env)], DepthHeuristic()

@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     feat = sub.add_parser("features", help="trunk features/s end to end on a dataset's frames (≥ 300)")
     feat.add_argument("--data", type=Path, required=True, help="a dataset folder")
     feat.add_argument("--frames", type=int, default=1024)
+    feat.add_argument("--precision", default="fp32",
+                      help="trunk precisions measured one after the other, comma-separated: fp32,bf16")
     tr = sub.add_parser("train", help="head training samples/s and its ratio to matmul FLOP/s (≥ 0.6)")
     tr.add_argument("--seconds", type=float, default=10.0)
     tr.add_argument("--precision", default="fp32",
@@ -59,6 +61,11 @@ def _positive(name: str, value: float) -> None:
         raise ConfigError(f"{name} must be > 0, got {value}")
 
 
+def _precisions(text: str) -> tuple[str, ...]:
+    """--precision fp32,bf16 → ('fp32', 'bf16')."""
+    return tuple(p.strip() for p in text.split(","))
+
+
 def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     """Run the chosen benchmark; returns its result and the one-line figure."""
     if args.what == "sim":
@@ -86,18 +93,18 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--frames", args.frames)
         from depthq.bench.features import bench_features  # torch: off the CLI's startup
 
-        r = bench_features(args.data, n=args.frames, device=args.device)
-        return (
-            r,
-            f"{r['frames_per_s']} frames/s ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)",
-        )
+        precisions = _precisions(args.precision)
+        r = bench_features(args.data, n=args.frames, device=args.device, precisions=precisions)
+        each = [f"{p['frames_per_s']} frames/s" + (f" ({name})" if len(precisions) > 1 else "")
+                for name, p in r["precisions"].items()]
+        return r, "; ".join(each) + f" ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)"
     if args.what == "train":
         _positive("--seconds", args.seconds)
         from depthq.bench.train import bench_train  # torch: off the CLI's startup
 
         if args.threads is not None:
             _positive("--threads", args.threads)
-        precisions = tuple(p.strip() for p in args.precision.split(","))
+        precisions = _precisions(args.precision)
         r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads)
         each = [f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's"
                 + (f" ({name})" if len(precisions) > 1 else "") for name, p in r["precisions"].items()]
