@@ -1,10 +1,7 @@
 """A policy from an exported ONNX graph (`depthq export`): onnxruntime and numpy only, as on a robot.
 
-The graph maps uint8 frames and the candidate actions to per-frame, per-action values; the actions
-and the selection rule come from the file's metadata, so the file alone defines the policy. A graph
-takes a batch of frames (F, H, W, 3), so `act_batch` decides for all of lock-step evaluation's
-canyons in one session run; one written before frame batches takes one frame (H, W, 3), run once
-per frame. A lookahead
+The graph maps a uint8 frame and the candidate actions to per-action values; the actions and the
+selection rule come from the file's metadata, so the file alone defines the policy. A lookahead
 Depth-Q-Net's graph takes candidate sequences (N, K) (docs/design.md#lookahead-selection); its K is
 in the metadata (a file without it looks one step ahead).
 """
@@ -12,7 +9,6 @@ in the metadata (a file without it looks one step ahead).
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +16,6 @@ import numpy as np
 
 from depthq.control.action_selection import Selection
 from depthq.control.greedy import GreedyPolicy
-from depthq.control.policy import Observation
 from depthq.errors import ConfigError, DataError
 
 
@@ -57,8 +52,6 @@ class OnnxPolicy(GreedyPolicy):
             raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
         self._set_candidates(kind, actions, lookahead, selection)
         self._actions = self.candidates.astype(np.float32)
-        frames = self.session.get_inputs()[0]
-        self._frames_input, self.frame_batch = frames.name, len(frames.shape) == 4
         self.runtime = f"onnxruntime {ort.__version__}"
         self.path = path
         self.name = f"ONNX:{path.stem}"
@@ -66,30 +59,14 @@ class OnnxPolicy(GreedyPolicy):
     def values(self, image: np.ndarray) -> np.ndarray:
         """Per-candidate predictions for one uint8 frame (H, W, 3): bins (N, n_bins) (a lookahead net's
         (N, K, n_bins)) or probabilities (N,)."""
-        return self.batch_values([image])[0]
-
-    def batch_values(self, images: Sequence[np.ndarray]) -> list[np.ndarray]:
-        """`values` of each frame: one session run for all of them (a file without frame batches: one
-        per frame)."""
-        for image in images:
-            if image.dtype != np.uint8 or image.shape != (*self.frame_size, 3):
-                raise ConfigError(
-                    f"{self.path.name}: expected a uint8 frame {(*self.frame_size, 3)}, "
-                    f"got {image.dtype} {image.shape}"
-                )
-        if not self.frame_batch:
-            return [self._run(image) for image in images]
-        return list(self._run(np.stack(images)))
-
-    def _run(self, frames: np.ndarray) -> np.ndarray:
-        return self.session.run(None, {self._frames_input: frames, "actions": self._actions})[0]
-
-    def act_batch(self, observations: Sequence[Observation]) -> list[float]:
-        """`act` on each observation (`BatchPolicy`), in one session run; `last_batch_values` holds
-        what `last_values` would hold for each."""
-        return self.act_on(self.batch_values([obs["image"] for obs in observations]))
+        if image.dtype != np.uint8 or image.shape != (*self.frame_size, 3):
+            raise ConfigError(
+                f"{self.path.name}: expected a uint8 frame {(*self.frame_size, 3)}, "
+                f"got {image.dtype} {image.shape}"
+            )
+        return self.session.run(None, {"frame": image, "actions": self._actions})[0]
 
     def describe(self) -> dict[str, Any]:
         actions = self.actions.tolist()
         return {"policy": self.name, "kind": self.kind, "onnx": str(self.path), "runtime": self.runtime,
-                "frame_batch": self.frame_batch, "actions": actions, **self.selection_record()}
+                "actions": actions, **self.selection_record()}

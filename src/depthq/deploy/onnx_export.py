@@ -1,12 +1,9 @@
 """`depthq export`: a trained Q-net as one ONNX graph, camera frame in, per-action values out.
 
-The graph takes F uint8 camera frames (F, H, W, 3) of the size it was exported for (by default the
-checkpoint's: its training data's frames) and the N candidate actions (N,) float32; it returns per frame
-the predicted depth bins (F, N, n_bins) in metres (Depth-Q-Net) or the collision probabilities (F, N)
-(Coll-Q-Net). A Depth-Q-Net that looks K steps ahead takes candidate sequences (N, K) and returns
-(F, N, K, n_bins). F frames in one call are what lock-step evaluation decides for (one session run
-for all live canyons); a file written before frame batches takes one frame (H, W, 3) and returns
-one frame's values (`depthq.control.onnx_policy` runs both).
+The graph takes a uint8 camera frame (H, W, 3) of the size it was exported for (by default the
+checkpoint's: its training data's frames) and the N candidate actions (N,) float32; it returns the predicted
+depth bins (N, n_bins) in metres (Depth-Q-Net) or the collision probabilities (N,) (Coll-Q-Net). A
+Depth-Q-Net that looks K steps ahead takes candidate sequences (N, K) and returns (N, K, n_bins).
 Resizing and scaling to [0, 1] are inside the graph, so a robot needs nothing but onnxruntime and
 numpy. The resize is `depthq.nets.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
 frames with Pillow's fixed-point algorithm (integer weights, a horizontal then a vertical pass,
@@ -64,7 +61,7 @@ def resize_weights(in_size: int, out_size: int) -> tuple[np.ndarray, int]:
 
 
 class FrameResize(nn.Module):
-    """uint8 frames (F, H, W, 3) → float (F, 3, S, S) in [0, 1], equal to `preprocess` for that frame size."""
+    """uint8 frame (H, W, 3) → float (1, 3, S, S) in [0, 1], equal to `preprocess` for that frame size."""
 
     def __init__(self, frame_size: tuple[int, int], size: int) -> None:
         super().__init__()
@@ -78,17 +75,16 @@ class FrameResize(nn.Module):
     def _round(total: torch.Tensor, bits: int) -> torch.Tensor:
         return torch.floor((total + float(1 << (bits - 1))) * (1.0 / (1 << bits))).clamp(0.0, 255.0)
 
-    def forward(self, frames: torch.Tensor) -> torch.Tensor:
-        image = frames.permute(0, 3, 1, 2).to(torch.float64)  # (F, 3, H, W)
-        image = self._round(image @ self.cols_t, self.col_bits)  # horizontal pass: (F, 3, H, S)
-        image = self._round(self.rows @ image, self.row_bits)  # vertical pass: (F, 3, S, S)
-        return (image / 255.0).to(torch.float32)
+    def forward(self, frame: torch.Tensor) -> torch.Tensor:
+        image = frame.permute(2, 0, 1).to(torch.float64)  # (3, H, W)
+        image = self._round(image @ self.cols_t, self.col_bits)  # horizontal pass: (3, H, S)
+        image = self._round(self.rows @ image, self.row_bits)  # vertical pass: (3, S, S)
+        return (image / 255.0).to(torch.float32).unsqueeze(0)
 
 
 class FramePolicyGraph(nn.Module):
-    """What the ONNX graph computes: (frames uint8 (F, H, W, 3), actions (N,) or sequences (N, K)) →
-    per-frame, per-candidate values (F, N, …): one trunk pass over the frames, one head pass over
-    every (frame, candidate) row."""
+    """What the ONNX graph computes: (frame uint8 (H, W, 3), actions (N,) or sequences (N, K)) →
+    per-candidate values."""
 
     def __init__(self, net: QNet, kind: str, input_size: int, frame_size: tuple[int, int]) -> None:
         super().__init__()
@@ -97,13 +93,9 @@ class FramePolicyGraph(nn.Module):
         self.head = net.head
         self.kind = kind
 
-    def forward(self, frames: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        features = self.trunk.features(self.resize(frames))  # (F, D)
-        f, n = features.shape[0], actions.shape[0]
-        rows = features[:, None].expand(f, n, features.shape[1]).reshape(f * n, features.shape[1])
-        candidates = actions[None].expand(f, *actions.shape).reshape(f * n, *actions.shape[1:])
-        out = self.head(rows, candidates)
-        out = out.reshape(f, n, *out.shape[1:])
+    def forward(self, frame: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        feature = self.trunk.features(self.resize(frame))
+        out = self.head(feature.expand(actions.shape[0], -1), actions)
         return torch.sigmoid(out) if self.kind == "coll" else out
 
 
@@ -136,18 +128,17 @@ def export_onnx(
     if not actions or any(not -1 <= a <= 1 for a in actions):
         raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
     graph = FramePolicyGraph(net, kind, input_size, frame_size).eval()
-    frames = torch.zeros(2, *frame_size, 3, dtype=torch.uint8)  # 2: a size-1 axis would be fixed at 1
+    frame = torch.zeros(*frame_size, 3, dtype=torch.uint8)
     lookahead = net.head.config.lookahead
     held = candidate_sequences(actions, lookahead)  # an example input: any N candidates run
     candidates = torch.tensor(held[:, 0] if lookahead == 1 else held, dtype=torch.float32)
     with torch.inference_mode(False), torch.no_grad():
         program = torch.onnx.export(
             graph,
-            (frames, candidates),
-            input_names=["frames", "actions"],
+            (frame, candidates),
+            input_names=["frame", "actions"],
             output_names=["bins" if kind == "depth" else "collision_probability"],
-            dynamic_shapes={"frames": {0: torch.export.Dim("f", min=1)},
-                            "actions": {0: torch.export.Dim("k", min=1)}},
+            dynamic_shapes={"frame": {}, "actions": {0: torch.export.Dim("k", min=1)}},
             opset_version=OPSET,
             dynamo=True,
             verbose=False,
