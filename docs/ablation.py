@@ -1,8 +1,10 @@
 """The ablation ladder (docs/ablation.md): from our defaults to the paper's settings, one factor at a
-time and all together, both networks, 200 and 500 runs, seeds 0 and 1, in `val` canyons only.
+time and all together, both networks, 200 and 500 runs, seeds 0 and 1, in `val` canyons only; then
+the rungs beyond the paper (seed 0).
 
     python docs/ablation.py run hard runs/ladder-hard      # runs (or resumes) every rung's sweep
     python docs/ablation.py table hard runs/ladder-hard    # ablation.md, ablation.png of what finished
+    python docs/ablation.py run paper runs/ladder-paper    # paper canyons: rows docs/val_choices.md lacks
 
 Every rung is a `depthq sweep` into OUT/4hz (or OUT/10hz: another rate is another dataset), so an
 interrupted ladder resumes with the same command and a rung shared with another ladder is reused.
@@ -29,10 +31,6 @@ from depthq.report.sweep import Sweep, parse_setting, retarget
 from depthq.report.tables import interval
 
 SIZES, SEEDS = (200, 500), (0, 1)
-LADDERS = {  # family: (preset, val canyons)
-    "hard": ("hard", "hard/val:1000-1019"),
-    "paper": ("paper", "val:1000-1019"),
-}
 PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "select=final")
 
 
@@ -45,6 +43,7 @@ class Rung:
     nets: tuple[str, ...] = ("depth", "coll")
     hz: float = 4.0
     coll_sets: tuple[str, ...] = ()  # Coll-Q-Net only (the paper's lr differs between the networks)
+    seeds: tuple[int, ...] = SEEDS
 
     def settings(self, net: str) -> tuple[str, ...]:
         return self.sets + (self.coll_sets if net == "coll" else ())
@@ -62,15 +61,35 @@ RUNGS = (
     Rung("10 Hz", hz=10.0),
     Rung("final weights after 200 epochs", ("epochs=200", "select=final")),
     Rung("all the paper's settings, 10 Hz", PAPER_SETTINGS, hz=10.0, coll_sets=("lr=0.01",)),
-    # Beyond the paper (docs/design.md#lookahead): Depth-Q-Net trained on the depth 1 … K steps ahead,
-    # to test whether its one-step horizon is what holds it back.
-    Rung("Depth-Q-Net lookahead 3", ("lookahead=3",), nets=("depth",)),
-    Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",)),
-    Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0),
-    # Beyond the paper (docs/design.md#heads): the paper-size head, a fixed PCA of the feature to 256
-    # numbers (the paper's 257 → 4096 first layer), kept only if it drives as well as ours.
-    Rung("paper-size head (PCA to 256)", ("feature_projection=256",)),
 )
+# Beyond the paper, one seed each (their own sections of docs/ablation.md measure them further):
+# Depth-Q-Net trained on the depth 1 … K steps ahead (docs/design.md#lookahead), to test whether its
+# one-step horizon is what holds it back; and the paper-size head, a fixed PCA of the feature to 256
+# numbers (the paper's 257 → 4096 first layer; docs/design.md#heads).
+BEYOND = (
+    Rung("Depth-Q-Net lookahead 3", ("lookahead=3",), nets=("depth",), seeds=(0,)),
+    Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",), seeds=(0,)),
+    Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0, seeds=(0,)),
+    Rung("paper-size head (PCA to 256)", ("feature_projection=256",), seeds=(0,)),
+)
+
+
+@dataclass(frozen=True)
+class Ladder:
+    """A canyon family's ladder: its preset (dataset, run length), its `val` canyons and rungs."""
+
+    preset: str
+    canyons: str
+    rungs: tuple[Rung, ...]
+    beyond: tuple[Rung, ...] = ()
+
+
+# The paper's canyons: only the rungs docs/val_choices.md has no row for, beside ours for reference.
+PAPER_RUNGS = ("ours", "dropout 0.5", "10 Hz", "final weights after 200 epochs")
+LADDERS = {
+    "hard": Ladder("hard", "hard/val:1000-1019", RUNGS, BEYOND),
+    "paper": Ladder("paper", "val:1000-1019", tuple(r for r in RUNGS if r.name in PAPER_RUNGS)),
+}
 
 
 def folder(out: Path, rung: Rung) -> Path:
@@ -78,7 +97,7 @@ def folder(out: Path, rung: Rung) -> Path:
 
 
 def sweep_args(family: str, rung: Rung, net: str, seeds: tuple[int, ...], out: Path) -> list[str]:
-    preset, canyons = LADDERS[family]
+    preset, canyons = LADDERS[family].preset, LADDERS[family].canyons
     args = ["sweep", "--preset", preset, "--canyons", canyons, "--sizes", ",".join(map(str, SIZES)),
             "--seeds", ",".join(map(str, seeds)), "--nets", net, "--hz", f"{rung.hz:g}",
             "--out", str(folder(out, rung))]
@@ -89,15 +108,18 @@ def sweep_args(family: str, rung: Rung, net: str, seeds: tuple[int, ...], out: P
 
 def sweep_of(family: str, rung: Rung, net: str) -> Sweep:
     """The Sweep that `sweep_args` runs, to find its models' folders."""
-    preset, canyons = LADDERS[family]
+    ladder = LADDERS[family]
     grid = tuple(parse_setting(s) for s in rung.settings(net))
-    return replace(retarget(get_preset(preset), None, canyons, rung.hz),
-                   subsets=SIZES, seeds=SEEDS, nets=(net,), grid=grid)
+    return replace(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz),
+                   subsets=SIZES, seeds=rung.seeds, nets=(net,), grid=grid)
 
 
 def run(family: str, out: Path) -> int:
+    ladder = LADDERS[family]
     for seed in SEEDS:
-        for rung in RUNGS:
+        for rung in ladder.rungs + ladder.beyond:
+            if seed not in rung.seeds:
+                continue
             for net in rung.nets:
                 args = sweep_args(family, rung, net, (seed,), out)
                 print("depthq " + " ".join(args), flush=True)
@@ -122,48 +144,57 @@ def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
     }
 
 
-def _cell(values: list[float], fmt: str) -> str:
+def _cell(values: list[float], fmt: str, seeds: int) -> str:
     if not values:
         return "–"
     text = f"{np.mean(values):{fmt}}"
     if (ci := interval(values)) is not None:
         text += f" [{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
-    return text + ("" if len(values) == len(SEEDS) else f" ({len(values)} seed)")
+    return text + ("" if len(values) == seeds else f" ({len(values)} of {seeds} seeds)")
 
 
-def results(family: str, out: Path) -> list[dict[str, Any]]:
+def results(family: str, out: Path, rungs: tuple[Rung, ...]) -> list[dict[str, Any]]:
     rows = []
-    for rung in RUNGS:
+    for rung in rungs:
         for net in rung.nets:
             sweep = sweep_of(family, rung, net)
             for n in SIZES:
                 cells = [m for model in sweep.models() if model.runs == n
                          if (m := _metrics(folder(out, rung), model.name, family == "hard")) is not None]
-                rows.append({"rung": rung.name, "net": net, "runs": n, "cells": cells})
+                rows.append({"rung": rung.name, "net": net, "runs": n, "cells": cells,
+                             "seeds": len(rung.seeds)})
     return rows
 
 
-def table(family: str, out: Path) -> int:
-    distance = "to first collision (m)" if family == "hard" else "distance (m)"
+def _markdown(rows: list[dict[str, Any]], distance: str) -> list[str]:
     lines = [f"| rung | network | runs | successes / 20 | {distance} | closest (m) | val loss |",
              "|---|---|---|---|---|---|---|"]
-    rows = results(family, out)
     for row in rows:
-        cells = row["cells"]
         net = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}[row["net"]]
-        values = {k: [c[k] for c in cells] for k in ("successes", "distance", "closest", "val_loss")}
-        lines.append(f"| {row['rung']} | {net} | {row['runs']} | {_cell(values['successes'], '.1f')} | "
-                     f"{_cell(values['distance'], '.2f')} | {_cell(values['closest'], '.2f')} | "
-                     f"{_cell(values['val_loss'], '.4f')} |")
-    note = (f"Mean over seeds {', '.join(map(str, SEEDS))} [95 % Student-t interval]; "
-            f"{LADDERS[family][1]}, `python docs/ablation.py run {family} OUT`.\n\n")
-    (out / "ablation.md").write_text(note + "\n".join(lines) + "\n")
-    _figure(rows, out / "ablation.png", family)
-    print((out / "ablation.md").read_text())
+        values = {k: [c[k] for c in row["cells"]] for k in ("successes", "distance", "closest", "val_loss")}
+        formats = {"successes": ".1f", "distance": ".2f", "closest": ".2f", "val_loss": ".4f"}
+        cell = {k: _cell(values[k], fmt, row["seeds"]) for k, fmt in formats.items()}
+        lines.append(f"| {row['rung']} | {net} | {row['runs']} | {cell['successes']} | {cell['distance']} | "
+                     f"{cell['closest']} | {cell['val_loss']} |")
+    return lines
+
+
+def table(family: str, out: Path) -> int:
+    ladder = LADDERS[family]
+    distance = "to first collision (m)" if family == "hard" else "distance (m)"
+    rows = results(family, out, ladder.rungs)
+    text = (f"Mean over seeds {', '.join(map(str, SEEDS))} [95 % Student-t interval]; {ladder.canyons}, "
+            f"`python docs/ablation.py run {family} OUT`.\n\n" + "\n".join(_markdown(rows, distance)) + "\n")
+    if ladder.beyond:
+        text += ("\nBeyond the paper, seed 0 (the lookahead's 3 seeds are in the `eval` canyons):\n\n"
+                 + "\n".join(_markdown(results(family, out, ladder.beyond), distance)) + "\n")
+    (out / "ablation.md").write_text(text)
+    _figure(rows, ladder.rungs, out / "ablation.png", family)
+    print(text)
     return 0
 
 
-def _figure(rows: list[dict[str, Any]], path: Path, family: str) -> None:
+def _figure(rows: list[dict[str, Any]], rungs: tuple[Rung, ...], path: Path, family: str) -> None:
     """Per rung, successes and the distance metric: one bar per (network, size) at the seeds' mean,
     each seed a dot (the distance does not saturate where successes are all 0 or all 20)."""
     groups = [(net, n) for net in ("depth", "coll") for n in SIZES]
@@ -172,7 +203,7 @@ def _figure(rows: list[dict[str, Any]], path: Path, family: str) -> None:
     width = 0.8 / len(groups)
     for ax, key, label in ((axes[0], "successes", "successes / 20"), (axes[1], "distance", distance)):
         for g, (net, n) in enumerate(groups):
-            for r, rung in enumerate(RUNGS):
+            for r, rung in enumerate(rungs):
                 cells = next((row["cells"] for row in rows
                               if row["rung"] == rung.name and row["net"] == net and row["runs"] == n), [])
                 if not cells:
@@ -185,8 +216,8 @@ def _figure(rows: list[dict[str, Any]], path: Path, family: str) -> None:
         ax.set_ylabel(label)
     axes[0].set_ylim(0, 20.5)
     axes[0].legend(fontsize=8, ncols=4, loc="upper right")
-    axes[0].set_title(f"Ablation ladder, {family} canyons ({LADDERS[family][1]}); dots: seeds")
-    axes[1].set_xticks(range(len(RUNGS)), [rung.name for rung in RUNGS], rotation=20, ha="right", fontsize=8)
+    axes[0].set_title(f"Ablation ladder, {family} canyons ({LADDERS[family].canyons}); dots: seeds")
+    axes[1].set_xticks(range(len(rungs)), [rung.name for rung in rungs], rotation=20, ha="right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
