@@ -9,10 +9,9 @@ from pathlib import Path
 import torch
 
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
-from depthq.train.config import PRECISIONS
+from depthq.train.config import check_precisions
 from depthq.train.features import BATCH as DECODE_BATCH
 from depthq.train.features import frame_batches, prefetch, trunk_threads
 
@@ -25,11 +24,7 @@ def bench_features(
     resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them;
     once per precision ("bf16": the trunk under bfloat16 autocast, measured only: the cache is fp32's).
     The first precision's figures are also the result's own keys."""
-    for precision in precisions:
-        if precision not in PRECISIONS:
-            raise ConfigError(f"precision must be one of {PRECISIONS}, got {precision!r}")
-    if not precisions:
-        raise ConfigError("bench features needs at least one precision")
+    check_precisions(precisions, "bench features")
     torch.set_num_threads(trunk_threads())
     dataset = Dataset.open(Path(data))
     where = resolve_device(device)

@@ -8,7 +8,6 @@ import time
 import numpy as np
 import torch
 
-from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.losses import depth_l1_loss
@@ -16,7 +15,7 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import build_trunk
 from depthq.parallel import cores
 from depthq.train.checkpoint import head_config
-from depthq.train.config import PRECISIONS, TrainConfig
+from depthq.train.config import TrainConfig, check_precisions
 from depthq.train.features import FeatureTable
 from depthq.train.samples import FeatureSamples
 from depthq.train.trainer import train_step
@@ -38,11 +37,7 @@ def bench_train(
     Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); the hidden layer's input
     gradient is never computed (features need none), so `ratio_actual` counts the work really done.
     """
-    for precision in precisions:
-        if precision not in PRECISIONS:
-            raise ConfigError(f"precision must be one of {PRECISIONS}, got {precision!r}")
-    if not precisions:
-        raise ConfigError("bench train needs at least one precision")
+    check_precisions(precisions, "bench train")
     where = resolve_device(device)
     torch.set_num_threads(threads or cores())
     torch.set_flush_denormal(True)  # as `train` does

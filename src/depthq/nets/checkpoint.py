@@ -31,8 +31,8 @@ load, with a warning that they cannot be verified.
 
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
-Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0). A newer
-version is refused by name.
+Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
+without `precision` a float32 training. A newer version is refused by name.
 """
 
 from __future__ import annotations
@@ -72,8 +72,9 @@ _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, t
 _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
 # TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
-# there was (a one-step Depth-Q-Net, its feature unprojected), so such a folder still loads and resumes.
-_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0}
+# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32), so such a folder
+# still loads and resumes.
+_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32"}
 
 
 @dataclass(frozen=True)

@@ -111,8 +111,7 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
         return False
     old = read_config(out)
     ignore = {"epochs", "data", "snapshots"}
-    # Every folder written before `precision` existed trained in float32: it resumes as "fp32".
-    old_train = {"precision": "fp32", **{k: v for k, v in old.get("train", {}).items() if k not in ignore}}
+    old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
     new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
     differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
     if old.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed

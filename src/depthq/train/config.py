@@ -28,6 +28,15 @@ DEFAULT_EPOCHS = 40
 PRECISIONS = ("fp32", "bf16")
 
 
+def check_precisions(precisions: tuple[str, ...], what: str) -> None:
+    """A benchmark's precisions: at least one, each of PRECISIONS (else a ConfigError naming it)."""
+    if not precisions:
+        raise ConfigError(f"{what} needs at least one precision")
+    for precision in precisions:
+        if precision not in PRECISIONS:
+            raise ConfigError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+
+
 def _int_at_least(name: str, value: object, low: int) -> None:
     if not isinstance(value, int) or isinstance(value, bool) or value < low:
         raise ConfigError(f"train.{name} must be an integer >= {low}, got {value!r}")
