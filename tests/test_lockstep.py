@@ -164,3 +164,11 @@ def test_benches_time_a_batch_and_both_evaluations(
     result = bench("evaluate", "--policy", "heuristic", "--canyons", "val:1000-1001", "--time-limit", "1",
                    "--workers", "1")
     assert result["same_runs"] and result["decisions"] == 2 * 4 and result["sequential_s"] > 0
+    result = bench("step", "--policy", str(checkpoints["depth"]), "--canyon", "hard/val:1000", "--steps", "3")
+    sim, nets = result["sim_ms"], result["policy_ms"]
+    assert result["canyon"] == "hard/val:1000" and all(v >= 0 for v in (*sim.values(), *nets.values()))
+    assert sim["render"] > 0 and nets["trunk_one"] > 0 and nets["head_in_batch"] > 0
+    floor = sum(sim.values()) + nets["trunk_in_batch"] + nets["head_in_batch"]
+    assert result["floor_ms_per_step"] == pytest.approx(floor, abs=0.02)
+    assert result["batch_bound"] > 1  # 20 frames through the trunk cost more than one decision
+    assert main(["bench", "step", "--canyon", "nowhere:1"]) == 2

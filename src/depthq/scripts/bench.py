@@ -50,9 +50,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                     help="a canyon set, as evaluate's --canyons (default: 20 val canyons)")
     ev.add_argument("--workers", type=int, default=2, help="processes, each driving its share of the canyons")
     ev.add_argument("--time-limit", type=float, default=None, help="seconds per run [the family's]")
-    for parser in (sim, col, feat, tr, pol, ev):
+    step = sub.add_parser(
+        "step", help="where an evaluation step's time goes, and the floor it sets for lock-step evaluation"
+    )
+    step.add_argument("--policy", default=None,
+                      help="a checkpoint folder (default: an untrained Depth-Q-Net of the default trunk)")
+    step.add_argument("--canyon", default="val:1000", help="the canyon driven (its family's world)")
+    step.add_argument("--steps", type=int, default=50, help="steps timed, part by part")
+    step.add_argument("--threads", type=int, default=1, help="torch threads (an evaluation worker has 1)")
+    for parser in (sim, col, feat, tr, pol, ev, step):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
-    for parser in (feat, tr, pol, ev):
+    for parser in (feat, tr, pol, ev, step):
         parser.add_argument("--device", default="auto", help=DEVICE_HELP)
 
 
@@ -120,6 +128,17 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"{r['policy']} in {r['canyons']} canyons ({r['decisions']} decisions), {r['workers']} "
             f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
             f"(×{r['speedup']}), {'the same' if r['same_runs'] else 'DIFFERENT'} runs"
+        )
+    if args.what == "step":
+        _positive("--steps", args.steps)
+        _positive("--threads", args.threads)
+        from depthq.bench.step import bench_step  # torch, mujoco: off the CLI's startup
+
+        r = bench_step(args.policy, args.canyon, args.steps, args.device, args.threads)
+        parts = ", ".join(f"{k} {v}" for k, v in {**r["sim_ms"], **r["policy_ms"]}.items())
+        return r, (
+            f"ms: {parts}; floor {r['floor_ms_per_step']} ms per lock-step step; a batch of {r['batch']} "
+            f"decisions costs at least {r['batch_bound']} × one ({r['threads']} threads)"
         )
     _positive("--decisions", args.decisions)
     if args.batches is not None and args.batches < 0:
