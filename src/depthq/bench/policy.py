@@ -47,9 +47,7 @@ def bench_policy(
         selection = Selection(switch=switch)
         policies = [make_policy(spec, device=where, selection=selection, threads=threads) for spec in specs]
     else:
-        trunk = build_trunk(DEFAULT_TRUNK)
-        head = build_head(HeadConfig("depth", trunk.feature_dim))
-        policies = [QNetPolicy(QNet(trunk, head), "depth", device=where)]
+        policies = [untrained_depth_policy(where)]
     env = CanyonEnv()
     obs, _ = env.reset(seed=0, options={"canyon": "eval:0"})
     frames = []
@@ -91,6 +89,13 @@ def bench_policy(
             for policy, ms, batch_ms in zip(policies, times, batch_times, strict=True)
         ],
     }
+
+
+def untrained_depth_policy(device: str) -> QNetPolicy:
+    """A freshly initialised Depth-Q-Net of the default trunk: a policy's latency depends on the
+    trunk and the head's shape, not on the weights."""
+    trunk = build_trunk(DEFAULT_TRUNK)
+    return QNetPolicy(QNet(trunk, build_head(HeadConfig("depth", trunk.feature_dim))), "depth", device=device)
 
 
 def _batch_figures(ms: list[float]) -> dict:

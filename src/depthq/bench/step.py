@@ -10,15 +10,13 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from depthq.bench.policy import BATCH, untrained_depth_policy
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.qnet_policy import BATCH_FRAMES, QNetPolicy
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import HeadConfig, QNet, build_head
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.nets.trunk import preprocess
 from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
 from depthq.sim.world import WorldConfig, world_for
-
-BATCH = 20  # one lock-step step of a worker that drives the 20 evaluation canyons
 
 
 def _ms(fn: Callable[[], object], repeats: int) -> float:
@@ -47,12 +45,7 @@ def bench_step(
     canyon_id = parse_canyon(canyon)  # a bad canyon fails before the trunk is built
     torch.set_num_threads(threads)
     where = str(resolve_device(device))
-    if spec:
-        policy = QNetPolicy.from_checkpoint(spec, device=where)
-    else:
-        trunk = build_trunk(DEFAULT_TRUNK)
-        net = QNet(trunk, build_head(HeadConfig("depth", trunk.feature_dim)))
-        policy = QNetPolicy(net, "depth", device=where)
+    policy = QNetPolicy.from_checkpoint(spec, device=where) if spec else untrained_depth_policy(where)
     env = CanyonEnv(EnvConfig(world=world_for(WorldConfig(), canyon_id.family), time_limit_s=1e6))
     env.reset(seed=0, options={"canyon": canyon_id})
     world, rng, expert = env.world, np.random.default_rng(0), DepthHeuristic()
