@@ -98,7 +98,8 @@ def folder(out: Path, rung: Rung) -> Path:
 
 def sweep_args(family: str, rung: Rung, net: str, seeds: tuple[int, ...], out: Path) -> list[str]:
     preset, canyons = LADDERS[family].preset, LADDERS[family].canyons
-    args = ["sweep", "--preset", preset, "--canyons", canyons, "--sizes", ",".join(map(str, SIZES)),
+    args = ["sweep", "--preset", preset, "--canyons", canyons, "--runs", str(max(SIZES)),
+            "--sizes", ",".join(map(str, SIZES)),
             "--seeds", ",".join(map(str, seeds)), "--nets", net, "--hz", f"{rung.hz:g}",
             "--out", str(folder(out, rung))]
     for setting in rung.settings(net):
@@ -111,7 +112,7 @@ def sweep_of(family: str, rung: Rung, net: str) -> Sweep:
     ladder = LADDERS[family]
     grid = tuple(parse_setting(s) for s in rung.settings(net))
     return replace(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz),
-                   subsets=SIZES, seeds=rung.seeds, nets=(net,), grid=grid)
+                   runs=max(SIZES), subsets=SIZES, seeds=rung.seeds, nets=(net,), grid=grid)
 
 
 def run(family: str, out: Path) -> int:

@@ -103,6 +103,14 @@ def test_collecting_into_a_folder_with_another_config_refuses(reference):
         collect(reference.root, CollectConfig(runs=5, val_runs=1, max_steps=40), seed=3, progress=False)
 
 
+def test_a_run_does_not_depend_on_how_many_are_collected(reference, tmp_path):
+    """Why `depthq sweep --runs 500` trains the models a 900-run dataset would: run i is the same."""
+    fewer = collect(tmp_path / "ds", replace(CONFIG, runs=2), seed=3, workers=1, progress=False)
+    assert len(fewer.entries("train")) >= 2 and len(fewer.entries()) < len(reference.entries())
+    assert [e.sha256 for e in fewer.entries()] == [reference.entry(e.split, e.index).sha256
+                                                  for e in fewer.entries()]
+
+
 def test_cli_rejects_bad_values(tmp_path, capsys):
     assert main(["collect", "--runs", "0", "--out", str(tmp_path / "x")]) == 2
     assert "--runs" in capsys.readouterr().err

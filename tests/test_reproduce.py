@@ -110,6 +110,7 @@ def test_a_sweep_widens_a_folder_and_reuses_its_models(smoke, tmp_path, capsys):
         (["--set", "nothing=1"], "nothing"),
         (["--sizes", "7"], "7"),
         (["--sizes", "6,3"], "3,6"),  # refused before any work, not after it
+        (["--runs", "5"], "--runs"),  # fewer runs collected than the largest size (6)
         (["--nets", "depth,lidar"], "lidar"),
     ):
         capsys.readouterr()

@@ -82,7 +82,8 @@ class Sweep:
             )
         parse_canyon_set(self.canyons)  # a clear error for a bad --canyons, before any work
         if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > self.runs:
-            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} (its runs)")
+            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} "
+                              f"(the training runs it collects, --runs)")
         if list(self.subsets) != sorted(self.subsets):  # the tables' rows: nested, smallest first
             raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be increasing, e.g. "
                               f"{','.join(map(str, sorted(set(self.subsets))))}")

@@ -23,6 +23,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hz", type=float, help="decisions (camera frames) per second (default: the preset's)")
     p.add_argument("--seeds", help="training seeds, e.g. 0-9 or 0,3,7 (default: the preset's)")
     p.add_argument("--sizes", help="training-set sizes in runs, e.g. 50,200 (default: the preset's)")
+    p.add_argument(
+        "--runs",
+        type=int,
+        help="training runs to collect, at least the largest size (default: the preset's); a run's data "
+        "does not depend on how many are collected, so --runs 500 --sizes 200,500 trains the models the "
+        "preset's 900 runs would",
+    )
     p.add_argument("--nets", help="depth, coll or depth,coll (default: both)")
     p.add_argument(
         "--set",
@@ -46,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     changes = {
         "seeds": parse_ints(args.seeds, "--seeds") if args.seeds else None,
         "subsets": parse_ints(args.sizes, "--sizes") if args.sizes else None,
+        "runs": args.runs,
         "nets": tuple(args.nets.split(",")) if args.nets else None,
         "grid": tuple(parse_setting(text) for text in args.set) or None,
     }
