@@ -65,12 +65,16 @@ RUNGS = (
 # Beyond the paper, one seed each (their own sections of docs/ablation.md measure them further):
 # Depth-Q-Net trained on the depth 1 … K steps ahead (docs/design.md#lookahead), to test whether its
 # one-step horizon is what holds it back; and the paper-size head, a fixed PCA of the feature to 256
-# numbers (the paper's 257 → 4096 first layer; docs/design.md#heads).
+# numbers (the paper's 257 → 4096 first layer; docs/design.md#heads). And the converse of the
+# lookahead: Coll-Q-Net's collision label shortened from 5 frames (1.25 s at 4 Hz) to 1 (Depth-Q-Net's
+# one step) or 2 (the 0.5 s its 5 frames span at 10 Hz), to test whether its far label carries it.
 BEYOND = (
     Rung("Depth-Q-Net lookahead 3", ("lookahead=3",), nets=("depth",), seeds=(0,)),
     Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",), seeds=(0,)),
     Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0, seeds=(0,)),
     Rung("paper-size head (PCA to 256)", ("feature_projection=256",), seeds=(0,)),
+    Rung("Coll-Q-Net label 1 frame (0.25 s)", ("horizon=1",), nets=("coll",), seeds=(0,)),
+    Rung("Coll-Q-Net label 2 frames (0.5 s)", ("horizon=2",), nets=("coll",), seeds=(0,)),
 )
 
 
@@ -146,8 +150,6 @@ def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
 
 
 def _cell(values: list[float], fmt: str, seeds: int) -> str:
-    if not values:
-        return "–"
     text = f"{np.mean(values):{fmt}}"
     if (ci := interval(values)) is not None:
         text += f" [{ci[0]:{fmt}}, {ci[1]:{fmt}}]"
@@ -168,15 +170,18 @@ def results(family: str, out: Path, rungs: tuple[Rung, ...]) -> list[dict[str, A
 
 
 def _markdown(rows: list[dict[str, Any]], distance: str) -> list[str]:
+    """The rows with at least one driven model, then a line naming those with none yet."""
     lines = [f"| rung | network | runs | successes / 20 | {distance} | closest (m) | val loss |",
              "|---|---|---|---|---|---|---|"]
-    for row in rows:
+    for row in (row for row in rows if row["cells"]):
         net = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}[row["net"]]
         values = {k: [c[k] for c in row["cells"]] for k in ("successes", "distance", "closest", "val_loss")}
         formats = {"successes": ".1f", "distance": ".2f", "closest": ".2f", "val_loss": ".4f"}
         cell = {k: _cell(values[k], fmt, row["seeds"]) for k, fmt in formats.items()}
         lines.append(f"| {row['rung']} | {net} | {row['runs']} | {cell['successes']} | {cell['distance']} | "
                      f"{cell['closest']} | {cell['val_loss']} |")
+    if missing := [f"{row['rung']} ({row['net']}, {row['runs']} runs)" for row in rows if not row["cells"]]:
+        lines += ["", "Not driven in this folder yet: " + "; ".join(missing) + "."]
     return lines
 
 
@@ -204,6 +209,7 @@ def _figure(rows: list[dict[str, Any]], rungs: tuple[Rung, ...], path: Path, fam
     width = 0.8 / len(groups)
     for ax, key, label in ((axes[0], "successes", "successes / 20"), (axes[1], "distance", distance)):
         for g, (net, n) in enumerate(groups):
+            name = f"{'DQN' if net == 'depth' else 'CQN'} {n} runs"
             for r, rung in enumerate(rungs):
                 cells = next((row["cells"] for row in rows
                               if row["rung"] == rung.name and row["net"] == net and row["runs"] == n), [])
@@ -211,8 +217,8 @@ def _figure(rows: list[dict[str, Any]], rungs: tuple[Rung, ...], path: Path, fam
                     continue
                 x = r + (g - (len(groups) - 1) / 2) * width
                 values = [c[key] for c in cells]
-                ax.bar(x, np.mean(values), width, color=f"C{g}", alpha=0.6,
-                       label=f"{'DQN' if net == 'depth' else 'CQN'} {n} runs" if r == 0 else None)
+                ax.bar(x, np.mean(values), width, color=f"C{g}", alpha=0.6, label=name)
+                name = None  # one legend entry per group, at its first drawn bar
                 ax.plot([x] * len(values), values, "k.", ms=4)
         ax.set_ylabel(label)
     axes[0].set_ylim(0, 20.5)
