@@ -1,6 +1,6 @@
 """The ablation ladder (docs/ablation.md): from our defaults to the paper's settings, one factor at a
 time and all together, both networks, 200 and 500 runs, seeds 0 and 1, in `val` canyons only; then
-the rungs beyond the paper (seed 0).
+the rungs beyond the paper (seed 0; the label's horizon seeds 0 and 1).
 
     python docs/ablation.py run hard runs/ladder-hard      # runs (or resumes) every rung's sweep
     python docs/ablation.py table hard runs/ladder-hard    # ablation.md, ablation.png of what finished
@@ -62,7 +62,7 @@ RUNGS = (
     Rung("final weights after 200 epochs", ("epochs=200", "select=final")),
     Rung("all the paper's settings, 10 Hz", PAPER_SETTINGS, hz=10.0, coll_sets=("lr=0.01",)),
 )
-# Beyond the paper, one seed each (their own sections of docs/ablation.md measure them further):
+# Beyond the paper, one seed each but the label's horizon (their own sections of docs/ablation.md):
 # Depth-Q-Net trained on the depth 1 … K steps ahead (docs/design.md#lookahead), to test whether its
 # one-step horizon is what holds it back; and the paper-size head, a fixed PCA of the feature to 256
 # numbers (the paper's 257 → 4096 first layer; docs/design.md#heads). And the converse of the
@@ -73,8 +73,8 @@ BEYOND = (
     Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",), seeds=(0,)),
     Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0, seeds=(0,)),
     Rung("paper-size head (PCA to 256)", ("feature_projection=256",), seeds=(0,)),
-    Rung("Coll-Q-Net label 1 frame (0.25 s)", ("horizon=1",), nets=("coll",), seeds=(0,)),
-    Rung("Coll-Q-Net label 2 frames (0.5 s)", ("horizon=2",), nets=("coll",), seeds=(0,)),
+    Rung("Coll-Q-Net label 1 frame (0.25 s)", ("horizon=1",), nets=("coll",)),
+    Rung("Coll-Q-Net label 2 frames (0.5 s)", ("horizon=2",), nets=("coll",)),
 )
 
 
@@ -192,12 +192,48 @@ def table(family: str, out: Path) -> int:
     text = (f"Mean over seeds {', '.join(map(str, SEEDS))} [95 % Student-t interval]; {ladder.canyons}, "
             f"`python docs/ablation.py run {family} OUT`.\n\n" + "\n".join(_markdown(rows, distance)) + "\n")
     if ladder.beyond:
-        text += ("\nBeyond the paper, seed 0 (the lookahead's 3 seeds are in the `eval` canyons):\n\n"
-                 + "\n".join(_markdown(results(family, out, ladder.beyond), distance)) + "\n")
+        beyond = results(family, out, ladder.beyond)
+        text += ("\nBeyond the paper, seed 0, and seeds 0 and 1 where a cell has an interval (the "
+                 "lookahead's 3 seeds are in the `eval` canyons):\n\n"
+                 + "\n".join(_markdown(beyond, distance)) + "\n")
+        _horizon_figure(rows + beyond, out / "horizon.png", ladder.canyons)
     (out / "ablation.md").write_text(text)
     _figure(rows, ladder.rungs, out / "ablation.png", family)
     print(text)
     return 0
+
+
+# How far each network's training signal looks ahead, in frames, per rung (4 Hz): Depth-Q-Net's
+# depth 1, 3 or 5 frames ahead, Coll-Q-Net's collision label over the next 1, 2 or 5 frames.
+HORIZONS = {
+    "depth": {"ours": 1, "Depth-Q-Net lookahead 3": 3, "Depth-Q-Net lookahead 5": 5},
+    "coll": {"Coll-Q-Net label 1 frame (0.25 s)": 1, "Coll-Q-Net label 2 frames (0.5 s)": 2, "ours": 5},
+}
+
+
+def _horizon_figure(rows: list[dict[str, Any]], path: Path, canyons: str) -> None:
+    """Distance to the first collision against how far the training signal looks ahead: one line per
+    (network, size) through the seeds' means, each seed a dot."""
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for net, n in ((net, n) for net in ("depth", "coll") for n in SIZES):
+        points = [(HORIZONS[net][row["rung"]] / 4.0, [c["distance"] for c in row["cells"]]) for row in rows
+                  if row["net"] == net and row["runs"] == n and row["rung"] in HORIZONS[net] and row["cells"]]
+        if not points:
+            continue
+        points.sort()
+        name = "Depth-Q-Net, depth ahead" if net == "depth" else "Coll-Q-Net, collision label"
+        ax.plot([x for x, _ in points], [np.mean(v) for _, v in points], "o-" if n == max(SIZES) else "s--",
+                color="C0" if net == "depth" else "C3", alpha=0.5 + 0.5 * (n == max(SIZES)),
+                label=f"{name}, {n} runs")
+        for x, values in points:
+            ax.plot([x] * len(values), values, "k.", ms=4)
+    ax.set_xlabel("how far the training signal looks ahead (s, at 4 Hz)")
+    ax.set_ylabel("to first collision (m)")
+    ax.set_title(f"Value horizon, {canyons}; dots: seeds", fontsize=10)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def _figure(rows: list[dict[str, Any]], rungs: tuple[Rung, ...], path: Path, family: str) -> None:
