@@ -26,6 +26,7 @@ import numpy as np
 
 from depthq.cli import main as depthq
 from depthq.configio import read_json
+from depthq.data.labels import HORIZON
 from depthq.report.presets import get_preset
 from depthq.report.sweep import Sweep, parse_setting, retarget
 from depthq.report.tables import interval
@@ -196,28 +197,36 @@ def table(family: str, out: Path) -> int:
         text += ("\nBeyond the paper, seed 0, and seeds 0 and 1 where a cell has an interval (the "
                  "lookahead's 3 seeds are in the `eval` canyons):\n\n"
                  + "\n".join(_markdown(beyond, distance)) + "\n")
-        _horizon_figure(rows + beyond, out / "horizon.png", ladder.canyons)
+        _horizon_figure(rows + beyond, ladder.rungs + ladder.beyond, out / "horizon.png", ladder.canyons)
     (out / "ablation.md").write_text(text)
     _figure(rows, ladder.rungs, out / "ablation.png", family)
     print(text)
     return 0
 
 
-# How far each network's training signal looks ahead, in frames, per rung (4 Hz): Depth-Q-Net's
-# depth 1, 3 or 5 frames ahead, Coll-Q-Net's collision label over the next 1, 2 or 5 frames.
-HORIZONS = {
-    "depth": {"ours": 1, "Depth-Q-Net lookahead 3": 3, "Depth-Q-Net lookahead 5": 5},
-    "coll": {"Coll-Q-Net label 1 frame (0.25 s)": 1, "Coll-Q-Net label 2 frames (0.5 s)": 2, "ours": 5},
-}
+# The setting that says how far each network's training signal looks ahead, in frames, and its default.
+HORIZON_SETTING = {"depth": ("lookahead", 1), "coll": ("horizon", HORIZON)}
 
 
-def _horizon_figure(rows: list[dict[str, Any]], path: Path, canyons: str) -> None:
+def _looks_ahead(rung: Rung, net: str) -> float | None:
+    """Seconds ahead that `net`'s training signal looks in `rung`, for the rungs at 4 Hz that change
+    nothing but that (ours, the lookahead, the label's horizon); None for the others."""
+    key, frames = HORIZON_SETTING[net]
+    settings = dict(setting.split("=", 1) for setting in rung.settings(net))
+    if rung.hz != Rung.hz or set(settings) - {key}:
+        return None
+    return int(settings.get(key, frames)) / rung.hz
+
+
+def _horizon_figure(rows: list[dict[str, Any]], rungs: tuple[Rung, ...], path: Path, canyons: str) -> None:
     """Distance to the first collision against how far the training signal looks ahead: one line per
     (network, size) through the seeds' means, each seed a dot."""
+    by_name = {rung.name: rung for rung in rungs}
     fig, ax = plt.subplots(figsize=(6.5, 4))
     for net, n in ((net, n) for net in ("depth", "coll") for n in SIZES):
-        points = [(HORIZONS[net][row["rung"]] / 4.0, [c["distance"] for c in row["cells"]]) for row in rows
-                  if row["net"] == net and row["runs"] == n and row["rung"] in HORIZONS[net] and row["cells"]]
+        points = [(ahead, [c["distance"] for c in row["cells"]]) for row in rows
+                  if row["net"] == net and row["runs"] == n and row["cells"]
+                  if (ahead := _looks_ahead(by_name[row["rung"]], net)) is not None]
         if not points:
             continue
         points.sort()
