@@ -10,7 +10,7 @@ import pytest
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.report.presets import get_preset
-from depthq.report.reproduce import build_stages, reproduce
+from depthq.report.reproduce import build_stages, record_stage_time, reproduce
 from depthq.report.tables import interval
 
 
@@ -76,6 +76,17 @@ def test_resume_after_a_deleted_stage_redoes_only_that_stage(smoke):
         if path != redone:
             assert path.stat().st_mtime_ns == stamp, f"{path} was redone"
     assert set(read_json(smoke / "stages.json")) == set(times)
+
+
+def test_two_sweeps_widening_one_folder_keep_each_others_stage_times(tmp_path):
+    """Sweeps A and B run at once into one folder, each recording its stages as they end: A's
+    later write must not drop the stage B recorded after A's previous write."""
+    path = tmp_path / "stages.json"
+    record_stage_time(path, "train depth_n6_s0", 1.5)  # A
+    record_stage_time(path, "train depth_n6_s1", 2.5)  # B
+    times = record_stage_time(path, "evaluate depth_n6_s0", 0.5)  # A again
+    expected = {"train depth_n6_s0": 1.5, "train depth_n6_s1": 2.5, "evaluate depth_n6_s0": 0.5}
+    assert times == expected and read_json(path) == expected
 
 
 @pytest.mark.slow

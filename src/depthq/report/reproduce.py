@@ -205,11 +205,20 @@ def run_sweep(
         dynamic_ncols=True,
     ) as bar:
         for name, seconds in executor.run_jobs(todo):
-            times[name] = seconds
-            write_json(times_path, times)
+            times = record_stage_time(times_path, name, seconds)
             bar.set_postfix_str(f"done: {name}")
             bar.update(1)
     build_report(out, sweep, times)
+    return times
+
+
+def record_stage_time(path: Path, name: str, seconds: float) -> dict[str, float]:
+    """Add a stage's seconds to `path` (OUT/stages.json), merged with what the file holds now, not
+    with what it held when this sweep started: two sweeps widening one folder at once (one per
+    core) keep each other's times. Returns every stage's seconds."""
+    times = read_json(path) if path.is_file() else {}
+    times[name] = seconds
+    write_json(path, times)
     return times
 
 
