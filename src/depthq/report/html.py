@@ -108,7 +108,7 @@ CLAIMS = [
         "paper's eval canyons it brings Depth-Q-Net level with Coll-Q-Net at 500 runs (19.3 vs 20/20, "
         "20.96 vs 20.84 m), not at 200 (12.7 vs 18.3/20)",
         "docs/ablation.md, rung 'final weights after 200 epochs'; docs/hard_canyons.md#table-i-final "
-        "(2 seeds); docs/results.md#table-i-final (3 seeds)",
+        "(3 seeds); docs/results.md#table-i-final (3 seeds)",
     ),
     (
         "Future depth one frame ahead is a sufficient value signal",
