@@ -18,7 +18,8 @@ SRC = Path(depthq.__file__).parent
 # control's learned policies sit above `nets`, the rest of control below `data` (collection drives the
 # exploration policy). Keep in step with the order in `depthq`'s docstring.
 LAYERS: list[dict[str, tuple[str, ...]]] = [
-    {"base": ("depthq.errors", "depthq.configio", "depthq.parallel", "depthq.flags")},  # imports no layer
+    # imports no layer
+    {"base": ("depthq.errors", "depthq.configio", "depthq.parallel", "depthq.flags", "depthq.host")},
     {"sim": ("depthq.sim",)},
     {"control": ("depthq.control",)},  # the Policy interface, exploration (OU), expert (heuristic)
     {"data": ("depthq.data",)},

@@ -1,6 +1,7 @@
 """Lock-step evaluation (docs/design.md#lockstep) gives the runs of one canyon at a time: a batched
-decision is one-frame decisions to the bit, and whole runs (every action, every runs.csv record)
-are the same. Real MuJoCo runs, real EfficientNet-Lite0 weights, real trainings; no mocks."""
+decision is the one-frame decision, from values equal but for the last bits a batch's sums may
+change, and whole runs (every action, every runs.csv record) are the same. Real MuJoCo runs, real
+EfficientNet-Lite0 weights, real trainings; no mocks."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pytest
 import torch
 
 from depthq.cli import main
+from depthq.control.action_selection import TIE_TOL, select_coll_action, select_depth_action
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
@@ -74,18 +76,33 @@ def one_torch_thread():
     torch.set_num_threads(threads)
 
 
-def test_a_batched_decision_is_one_frame_decisions_to_the_bit() -> None:
+def assert_batch_decides_as_alone(policy: QNetPolicy, observations: list[dict]) -> None:
+    """`act_batch` on all frames and on two of them: each frame's decision as alone, its values within
+    last-bit noise (well inside the selection's tie tolerance, so no tie can flip)."""
+    alone, values = [], []
+    for obs in observations:
+        alone.append(policy.act(obs))
+        values.append(policy.last_values)
+    for frames in (slice(None), slice(5, 7)):  # whichever frames share the call
+        assert policy.act_batch(observations[frames]) == alone[frames]
+        for batched, one in zip(policy.last_batch_values, values[frames], strict=True):
+            np.testing.assert_allclose(batched, one, rtol=1e-6, atol=TIE_TOL / 4)
+
+
+def test_a_batched_decision_is_one_frame_decisions() -> None:
     rng = np.random.default_rng(0)
     observations = [{"image": f} for f in rng.integers(0, 256, (BATCH_FRAMES + 3, 308, 410, 3), np.uint8)]
     for policy in _untrained():
-        alone, values = [], []
-        for obs in observations:
-            alone.append(policy.act(obs))
-            values.append(policy.last_values)
-        assert policy.act_batch(observations) == alone  # two trunk calls, one head call
-        assert all(map(np.array_equal, policy.last_batch_values, values))
-        assert policy.act_batch(observations[5:7]) == alone[5:7]  # whichever frames share the call
-        assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))
+        assert_batch_decides_as_alone(policy, observations)  # two trunk calls, one head call
+
+
+def test_a_tie_within_last_bit_noise_stays_a_tie() -> None:
+    actions = np.array([-1.0, 0.0, 1.0])
+    for noise in (0.0, 3e-6, -3e-6):  # a few ulps of 2.5 m, as a batch's sums may add
+        assert select_depth_action(np.array([[2.5], [2.5 + noise], [1.0]]), actions) == 0.0
+        assert select_depth_action(np.array([[2.5 + noise], [1.0], [2.5]]), actions) == -1.0
+        assert select_coll_action(np.array([0.2, 0.9, 0.2 + noise]), actions) == -1.0
+    assert select_depth_action(np.array([[2.5], [2.5 - 2 * TIE_TOL], [1.0]]), actions) == -1.0
 
 
 def test_which_policies_decide_in_batches() -> None:
@@ -127,8 +144,8 @@ def test_a_checkpoint_drives_in_lockstep_as_alone(checkpoints: dict[str, Path]) 
         lanes = [Lane(c, 1000 + k, keep_every=5 * (k == 0), video=k == 0) for k, c in enumerate(CANYONS)]
         alone, together = _alone_and_lockstep(partial(QNetPolicy.from_checkpoint, folder), lanes, 4.0)
         assert all(_same_run(a, b) for a, b in zip(alone, together, strict=True))
-        snaps = zip(alone[0]["snapshots"], together[0]["snapshots"], strict=True)
-        assert all(np.array_equal(a["values"], b["values"]) for a, b in snaps)
+        for a, b in zip(alone[0]["snapshots"], together[0]["snapshots"], strict=True):
+            np.testing.assert_allclose(a["values"], b["values"], rtol=1e-6, atol=TIE_TOL / 4)
 
 
 def _records(folder: Path) -> list[dict[str, str]]:
@@ -143,6 +160,10 @@ def test_lockstep_evaluation_writes_the_sequential_runs(checkpoints: dict[str, P
     evaluate(spec, alone, replace(config, lockstep=False), workers=1, progress=False, video=False)
     evaluate(spec, together, config, workers=1, progress=False)  # one worker: all three in one batch
     assert _records(together) == _records(alone)
+    for folder in (together, alone):  # the machine that made them (docs/design.md#determinism)
+        assert json.loads((folder / "summary.json").read_text())["host"]["torch"]["threads"] == 1
+    trained = json.loads((checkpoints["depth"] / "config.json").read_text())["host"]
+    assert trained["torch"]["threads"] >= 1 and trained["cpu"]["machine"]
     with np.load(together / "trajectories.npz") as a, np.load(alone / "trajectories.npz") as b:
         assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files)
     assert (together / "video.mp4").stat().st_size > 1000

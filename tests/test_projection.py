@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 from safetensors.torch import load_file
+from test_lockstep import assert_batch_decides_as_alone
 from test_lookahead import _one_step_head_by_hand
 
 from depthq.cli import main
@@ -194,7 +195,7 @@ def _val_frames(data: Path, n: int) -> list[np.ndarray]:
 
 
 @pytest.mark.slow
-def test_projected_heads_decide_in_batches_to_the_bit(projected: Path, small_dataset: Path) -> None:
+def test_projected_heads_decide_in_batches_as_alone(projected: Path, small_dataset: Path) -> None:
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # as an evaluation's workers (docs/design.md#lockstep)
     try:
@@ -208,14 +209,7 @@ def test_projected_heads_decide_in_batches_to_the_bit(projected: Path, small_dat
             policies.append(QNetPolicy(QNet(trained.net.trunk, head), kind))
         observations = [{"image": f} for f in _val_frames(small_dataset, BATCH_FRAMES + 3)]
         for policy in policies:
-            alone, values = [], []
-            for obs in observations:
-                alone.append(policy.act(obs))
-                values.append(policy.last_values)
-            assert policy.act_batch(observations) == alone
-            assert all(map(np.array_equal, policy.last_batch_values, values))
-            assert policy.act_batch(observations[5:7]) == alone[5:7]
-            assert all(map(np.array_equal, policy.last_batch_values, values[5:7]))
+            assert_batch_decides_as_alone(policy, observations)
     finally:
         torch.set_num_threads(threads)
 

@@ -2,7 +2,8 @@
 
 Layers, each importing only from those before it (tests/test_layers.py checks the source):
 
-    errors, configio, parallel, flags       base: no layer below
+    errors, configio, parallel, flags,      base: no layer below
+    host
     ← sim                                   canyons, MuJoCo world, sensors, the Gymnasium env
     ← control                               the Policy interface, OU exploration, the depth heuristic,
                                             action selection rules (collection drives them)

@@ -26,6 +26,7 @@ VERBS: dict[str, str] = {
     "probe": "probe",
     "export": "export",
     "bag": "bag",
+    "host": "host",
 }
 
 

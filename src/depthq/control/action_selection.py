@@ -2,8 +2,8 @@
 
 Depth-Q-Net: for each candidate action, the minimum predicted bin (bins predicted as exactly 0 are
 ignored: a ReLU output of 0 means "no prediction"); take the action whose closest obstacle is
-farthest. Coll-Q-Net: the action with the lowest collision probability. Ties go straight when
-straight is among the best, otherwise to the first tied candidate.
+farthest. Coll-Q-Net: the action with the lowest collision probability. Ties (within TIE_TOL) go
+straight when straight is among the best, otherwise to the first tied candidate.
 
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead-selection) scores candidate action
 sequences (N, K), all in one head pass: each action held for K steps, and with `Selection.switch`
@@ -37,6 +37,10 @@ RULES = {
     "if straight is tied, else to the first",
 }
 DEPTH_RULES = ("farthest_nearest_bin", "discounted_nearest_bin")
+# Scores within TIE_TOL of the best are tied (metres for Depth-Q-Net, probability for Coll-Q-Net): above
+# the last-bit noise that a batch's sums add to float32 values below 10 (a few ulps, < 5e-6;
+# docs/design.md#lockstep), so a tie stays one whichever kernel computed the scores.
+TIE_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -103,7 +107,7 @@ def first_actions(candidates: np.ndarray) -> np.ndarray:
     return candidates[:, 0] if candidates.ndim == 2 else candidates
 
 
-def pick_best(scores: np.ndarray, actions: np.ndarray, maximise: bool, tol: float = 1e-6) -> float:
+def pick_best(scores: np.ndarray, actions: np.ndarray, maximise: bool, tol: float = TIE_TOL) -> float:
     """The best-scoring action; ties (within `tol`) go to 0 if it is tied, else to the first tied."""
     scores = np.asarray(scores, dtype=np.float64)
     best = scores.max() if maximise else scores.min()

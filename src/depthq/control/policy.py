@@ -36,11 +36,11 @@ class Policy(Protocol):
 class BatchPolicy(Policy, Protocol):
     """A policy without per-run state that decides for several runs at once (docs/design.md#lockstep).
 
-    `act_batch(observations)[i]` is `act(observations[i])` to the bit, whatever the other
-    observations, in an evaluation's workers (one torch thread each: with more, torch splits a
-    batch's sums otherwise than one frame's): which runs share a call must not change a run. A policy
-    with per-run state (OU noise) does not offer it; lock-step evaluation gives each of its runs an
-    instance of its own.
+    `act_batch(observations)[i]` is `act(observations[i])` whatever the other observations: the same
+    decision, from values that may differ from one frame's in their last bits (a BLAS kernel may sum a
+    batch in another order), so a decision can differ only where two candidates' scores lie within
+    that noise of a tie. A policy with per-run state (OU noise) does not offer it; lock-step
+    evaluation gives each of its runs an instance of its own.
     """
 
     def act_batch(self, observations: Sequence[Observation]) -> list[float]: ...

@@ -20,9 +20,8 @@ from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_s
 from depthq.nets.heads import QNet, probability
 from depthq.nets.trunk import preprocess
 
-# Frames per trunk call in `act_batch`, whose values must be one-frame calls' to the bit (`BatchPolicy`,
-# docs/design.md#lockstep). On the reference CPU (torch 2.13, one thread) the trunk gives every frame
-# batch-1's bits up to 15 frames per call, not at 16 (a 1×1 convolution takes another kernel).
+# Frames per trunk call in `act_batch` (docs/design.md#lockstep): up to 15 a call, each frame's features
+# were those of a one-frame call on both CPUs measured (torch 2.13, one thread), not at 16.
 BATCH_FRAMES = 8
 
 
@@ -97,7 +96,7 @@ class QNetPolicy(GreedyPolicy):
     @torch.inference_mode()
     def candidate_values(self, features: torch.Tensor) -> np.ndarray:
         """`values` of F frames' features (F, D), (F, N, …): one head call over all their candidates
-        (`QNet.candidate_outputs`, whose padding keeps each row's bits its own)."""
+        (`QNet.candidate_outputs`)."""
         out = self.net.candidate_outputs(features, self._actions_t)
         if self.kind == "coll":  # per frame: a vectorised sigmoid's tail elements take a scalar path
             out = torch.stack([probability(logits) for logits in out])

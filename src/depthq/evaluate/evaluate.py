@@ -30,6 +30,7 @@ from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
 from depthq.evaluate.metrics import summarize
 from depthq.evaluate.run_record import FIG4_EVERY, RunRecord
 from depthq.evaluate.video import write_video
+from depthq.host import host_fingerprint
 from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
@@ -298,6 +299,7 @@ def evaluate(
         "policy": description,
         "config": to_dict(config),
         "provenance": provenance(),
+        "host": host_fingerprint(threads=1),  # every worker decides on one torch thread
         "summary": summarize(ordered),
         **({"offline": offline} if offline else {}),
         "runs": [{f: r[f] for f in RUN_FIELDS} for r in ordered],

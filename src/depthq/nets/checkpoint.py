@@ -9,6 +9,7 @@ config.json (format version 3):
 
     format, format_version   "depthq-checkpoint", 3
     provenance               the package and version that wrote it
+    host                     the machine and torch threads that trained it (`depthq.host`)
     train                    the full TrainConfig (`select`: the weights a policy uses by default;
                              `snapshots`: epochs whose weights are kept as well; `lookahead`: the
                              steps a Depth-Q-Net predicts, also in `head`;
@@ -54,6 +55,7 @@ from depthq.configio import from_dict, provenance, read_json, to_dict, write_jso
 from depthq.control.action_selection import ACTIONS, RULE_OF
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
+from depthq.host import host_fingerprint
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
 from depthq.nets.trunk import TRUNKS, build_trunk
 
@@ -177,13 +179,16 @@ def write_config(
     learning_rate: float,
     dataset: DatasetRecord,
     policy: PolicyRecord,
+    threads: int | None = None,
 ) -> None:
-    """Write `folder`/config.json in the current format (`train`: the TrainConfig as a dict)."""
+    """Write `folder`/config.json in the current format (`train`: the TrainConfig as a dict;
+    `threads`: the torch threads the training runs on, None: this process's)."""
     trunk = str(train["trunk"])
     write_json(Path(folder) / CONFIG, {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "provenance": provenance(),
+        "host": host_fingerprint(threads),
         "train": train,
         "head": to_dict(head),
         "trunk": trunk,

@@ -32,13 +32,6 @@ from depthq.nets.trunk import Trunk
 HeadKind = Literal["depth", "coll"]
 HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
 COLL_HIDDEN = 25
-# `QNet.candidate_outputs` pads its (frame, candidate) rows to a multiple of HEAD_ROWS. On the reference
-# CPU (torch 2.13, one thread) a row's values then depend on that row alone, whatever the call's size
-# and the row's place in it (measured for 4 … 1024 rows, both heads, lookahead 1 and 5, feature
-# projection 0, 8, 64, 256): below 4 rows, and at some sizes that are not multiples of 4, sgemm takes
-# other kernels with other last bits. So one frame's 3 candidates and a lock-step batch of 20 frames'
-# 60 give the same values (docs/design.md#lockstep).
-HEAD_ROWS = 4
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
 
 
@@ -222,15 +215,12 @@ class QNet(nn.Module):
     @torch.no_grad()
     def candidate_outputs(self, features: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
         """F frames' features (F, D) and N candidates (N,) or sequences (N, K) → the head on every
-        (frame, candidate) row in one call, (F, N, …): depth bins or collision logits. The rows are
-        padded to a multiple of HEAD_ROWS, so each row's bits are its own. Call `.eval()` first."""
+        (frame, candidate) row in one call, (F, N, …): depth bins or collision logits. A row's last
+        bits may depend on the call's size (docs/design.md#lockstep). Call `.eval()` first."""
         n = len(candidates)
         rows = features.repeat_interleave(n, dim=0)
         actions = candidates.repeat(len(features), *([1] * (candidates.ndim - 1)))
-        if pad := -len(rows) % HEAD_ROWS:
-            rows = torch.cat([rows, rows[-1:].expand(pad, -1)])
-            actions = torch.cat([actions, actions[-1:].expand(pad, *actions.shape[1:])])
-        out = self.head(rows, actions)[: len(features) * n]
+        out = self.head(rows, actions)
         return out.reshape(len(features), n, *out.shape[1:])
 
     @torch.no_grad()

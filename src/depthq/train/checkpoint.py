@@ -134,7 +134,9 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     return True
 
 
-def write_config(out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str) -> None:
+def write_config(
+    out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str, threads: int | None = None
+) -> None:
     """config.json: the training, its dataset (absolute path, fingerprint, env config as its manifest
     records it) and what a policy of it needs (`depthq.nets.checkpoint.PolicyRecord`)."""
     env = dataset.config.get("env")  # none in a robot's recording
@@ -148,7 +150,7 @@ def write_config(out: Path, config: TrainConfig, dataset: Dataset, fingerprint: 
         rate, bins = env["world"]["decision_hz"], env["bins"]
     policy = PolicyRecord(float(rate), (height, width), ACTIONS, RULE_OF[config.model], bins)
     where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env)
-    write_record(out, to_dict(config), head_config(config), config.learning_rate, where, policy)
+    write_record(out, to_dict(config), head_config(config), config.learning_rate, where, policy, threads)
 
 
 def save_epoch(

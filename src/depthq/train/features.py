@@ -8,7 +8,8 @@ Layout, inside the dataset folder:
                                                    manifest order
     DIR/features/<trunk>_<size>/index.json          written last: the cache is complete only when it
                                                    exists and matches (format, trunk, input_size,
-                                                   fingerprint, shape, bytes, package version)
+                                                   fingerprint, shape, bytes, package version);
+                                                   `host`: the machine and threads that computed it
 
 index.json: `runs` maps a run name (e.g. "train_000012") to [first row, n_frames]; `fingerprint`
 is the SHA-256 of the manifest's (split, index, file sha256) rows, so adding, removing or
@@ -38,6 +39,7 @@ from tqdm import tqdm
 from depthq.configio import provenance, read_json, write_json
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import ConfigError, DataError
+from depthq.host import host_fingerprint
 from depthq.nets.trunk import Trunk, build_trunk, preprocess, trunk_spec
 from depthq.parallel import cores
 
@@ -140,7 +142,10 @@ def compute_features(
         tmp.unlink(missing_ok=True)
     seconds = time.perf_counter() - start
     path = folder / ARRAY
-    write_json(folder / INDEX, {**index, "bytes": path.stat().st_size, "seconds": round(seconds, 2)})
+    # The machine and threads that computed them, recorded but not checked: a cache copied from
+    # another host is used as it is (its last bits may differ from this host's, docs/design.md#determinism).
+    write_json(folder / INDEX, {**index, "host": host_fingerprint(), "bytes": path.stat().st_size,
+                                "seconds": round(seconds, 2)})
     return n_frames / seconds
 
 

@@ -57,9 +57,8 @@ def train(
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
-    checkpoint.write_config(out, config, dataset, fingerprint)
-
     torch.set_num_threads(threads or cores())
+    checkpoint.write_config(out, config, dataset, fingerprint, torch.get_num_threads())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
