@@ -14,7 +14,6 @@ from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import build_trunk
 from depthq.parallel import cores
-from depthq.train.checkpoint import head_config
 from depthq.train.config import TrainConfig, check_precisions
 from depthq.train.features import FeatureTable
 from depthq.train.samples import FeatureSamples
@@ -43,7 +42,7 @@ def bench_train(
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
     config = TrainConfig(model="depth", data="-")
-    head = head_config(config)
+    head = config.head()
     models = {p: QNet(build_trunk(config.trunk, pretrained=False), build_head(head)).to(where)
               for p in precisions}
     optimizers = {p: make_optimizer(m, config.learning_rate, config.weight_decay) for p, m in models.items()}

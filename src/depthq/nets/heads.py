@@ -9,6 +9,11 @@ A Depth-Q-Net head that looks `lookahead` = K steps ahead (docs/design.md#lookah
 actions of a sequence and ends in FC K·26: the bins at t+1 … t+K, (B, K, 26). K = 1 is the one-step
 head, with the same parameters, initialisation and (B, 26) output.
 
+A Depth-Q-Net head of `form` "per_action" (docs/design.md#heads) separates the scene from the action's
+effect: its hidden layer sees the feature alone, and it predicts the bins for each anchor action
+(−1, 0, +1) at once; a command between two anchors gets the linear blend of theirs. So one hidden
+pass serves every candidate, and what differs between actions is learnt in the output layer alone.
+
 A head with `feature_projection` = P > 0 first maps the D-d trunk feature to P numbers by a fixed
 linear map (docs/design.md#heads): the top-P principal directions of the training features
 (`pca_projection`), held as buffers, so the optimizer never sees them while checkpoints, policies and
@@ -18,7 +23,7 @@ dict and outputs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -26,11 +31,15 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from depthq.configio import OMIT_DEFAULT
 from depthq.errors import ConfigError
 from depthq.nets.trunk import Trunk
 
 HeadKind = Literal["depth", "coll"]
 HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
+# "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action.
+HEAD_FORMS: tuple[str, ...] = ("concat", "per_action")
+ANCHORS = (-1.0, 0.0, 1.0)  # the actions a "per_action" head predicts; a command in between blends two
 COLL_HIDDEN = 25
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
 
@@ -51,6 +60,8 @@ class HeadConfig:
     action_scale: float = 1.0  # the action enters the hidden layer as action_scale · a
     lookahead: int = 1  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
     feature_projection: int = 0  # P > 0: the feature projected to P numbers first; 0: none
+    form: str = field(default="concat", metadata=OMIT_DEFAULT)  # one of HEAD_FORMS
+
 
     def __post_init__(self) -> None:
         if self.kind not in HEAD_KINDS:
@@ -68,6 +79,13 @@ class HeadConfig:
             raise ConfigError(
                 f"HeadConfig.lookahead: a Coll-Q-Net head takes one action, got {self.lookahead!r}"
             )
+        if self.form not in HEAD_FORMS:
+            raise ConfigError(f"HeadConfig.form must be one of {HEAD_FORMS}, got {self.form!r}")
+        if self.form == "per_action" and (self.kind != "depth" or self.lookahead != 1):
+            raise ConfigError(
+                f"HeadConfig.form 'per_action' is a one-step Depth-Q-Net's (kind depth, lookahead 1), "
+                f"got kind {self.kind!r}, lookahead {self.lookahead!r}"
+            )
         p = self.feature_projection
         if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p <= self.feature_dim:
             raise ConfigError(
@@ -77,8 +95,8 @@ class HeadConfig:
 
     @property
     def input_dim(self) -> int:
-        """What the hidden layer takes: the (projected) feature and the action(s)."""
-        return (self.feature_projection or self.feature_dim) + self.lookahead
+        """What the hidden layer takes: the (projected) feature, and the action(s) unless per_action."""
+        return (self.feature_projection or self.feature_dim) + (self.form == "concat") * self.lookahead
 
 
 def pca_projection(features: np.ndarray, size: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -148,6 +166,8 @@ class Head(nn.Module):
             raise ConfigError(f"head: {feature.shape[0]} features but {action.shape[0]} actions")
         if self.projection is not None:
             feature = self.projection(feature)
+        if self.config.form == "per_action":
+            return F.relu(self.hidden(self.dropout(feature)))
         return F.relu(self.hidden(torch.cat([self.dropout(feature), action], dim=1)))
 
     @torch.no_grad()
@@ -165,12 +185,22 @@ class DepthHead(Head):
     t+1 … t+K, (B, K, n_bins)."""
 
     def __init__(self, config: HeadConfig) -> None:
-        super().__init__(config, nn.Linear(config.hidden, config.lookahead * config.n_bins))
+        outputs = len(ANCHORS) if config.form == "per_action" else config.lookahead
+        super().__init__(config, nn.Linear(config.hidden, outputs * config.n_bins))
 
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         bins = F.relu(self.output(self.hidden_features(feature, action)))
+        if self.config.form == "per_action":
+            return torch.einsum("ba,bak->bk", anchor_weights(action.reshape(-1).to(bins.dtype)),
+                                bins.reshape(-1, len(ANCHORS), self.config.n_bins))
         k = self.config.lookahead
         return bins if k == 1 else bins.reshape(-1, k, self.config.n_bins)
+
+
+def anchor_weights(action: torch.Tensor) -> torch.Tensor:
+    """(B,) commands → (B, 3) weights of the ANCHORS: linear interpolation, clipped to [−1, 1]."""
+    anchors = torch.tensor(ANCHORS, dtype=action.dtype, device=action.device)
+    return F.relu(1.0 - (action.clamp(-1.0, 1.0)[:, None] - anchors).abs())
 
 
 class CollHead(Head):

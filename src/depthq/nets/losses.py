@@ -10,7 +10,8 @@ from depthq.errors import ConfigError
 
 DEPTH_CLIP = 2.0  # metres; docs/design.md#bins
 CLIP_TOLERANCE = 1e-6  # a target within this of the clip counts as "at the clip" (float32 round-off)
-DEPTH_LOSSES = ("original", "valid_mean")
+DEPTH_LOSSES = ("original", "valid_mean", "relative")
+RELATIVE_FLOOR = 0.05  # m: "relative" divides by the target, never by less than this
 
 
 def depth_valid_mask(target: torch.Tensor, clip: float = DEPTH_CLIP) -> torch.Tensor:
@@ -31,6 +32,10 @@ def depth_l1_loss(
     every valid bin weighs the same whatever sample it is in: a sample with 3 near bins does not
     count as much as one with 26. A sample's own loss is the mean over its valid bins, 0 when it
     has none. A batch with no valid bin gives 0 (with a graph, so `backward` still works).
+
+    "relative": as "valid_mean", each bin's error divided by its target (at least RELATIVE_FLOOR): an
+    error of 10 cm on an obstacle 0.3 m away weighs as much as one of 67 cm at 2 m, as the selection
+    rule, which acts on the nearest bin, needs (docs/design.md#losses).
     """
     if pred.ndim != 2 or pred.shape != target.shape:
         raise ConfigError(
@@ -44,8 +49,7 @@ def depth_l1_loss(
         per_sample = (weight * (pred - torch.where(weight > 0, target, 0.0)).abs()).mean(dim=1)
         return per_sample.mean(), per_sample
     valid = depth_valid_mask(target, clip)
-    # Zero the invalid targets before subtracting: a NaN would poison the gradient even where masked.
-    errors = torch.where(valid, (pred - torch.where(valid, target, 0.0)).abs(), 0.0)
+    errors = _bin_errors(pred, target, valid, reduction)
     counts = valid.sum(dim=1)
     per_sample = errors.sum(dim=1) / counts.clamp(min=1)
     return errors.sum() / counts.sum().clamp(min=1), per_sample
@@ -86,11 +90,23 @@ def lookahead_l1_loss(
         per_sample = (per_step.view(pred.shape[:2]) * weights).sum(dim=1) / weights.sum()
         return per_sample.mean(), per_sample
     valid = depth_valid_mask(target, clip)
-    errors = torch.where(valid, (pred - torch.where(valid, target, 0.0)).abs(), 0.0)
+    errors = _bin_errors(pred, target, valid, reduction)
     sums = (errors.sum(dim=2) * weights).sum(dim=1)  # (B,)
     counts = (valid.sum(dim=2).to(pred.dtype) * weights).sum(dim=1)
     tiny = torch.finfo(pred.dtype).tiny  # no valid bin: a sum of 0 over a count of 0 gives 0, with a graph
     return sums.sum() / counts.sum().clamp(min=tiny), sums / counts.clamp(min=tiny)
+
+
+def _bin_errors(
+    pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, reduction: str
+) -> torch.Tensor:
+    """Each valid bin's absolute error ("relative": over its target), 0 elsewhere. The invalid targets
+    are zeroed before subtracting: a NaN would poison the gradient even where masked."""
+    clean = torch.where(valid, target, 0.0)
+    errors = (pred - clean).abs()
+    if reduction == "relative":
+        errors = errors / clean.clamp(min=RELATIVE_FLOOR)
+    return torch.where(valid, errors, 0.0)
 
 
 def coll_bce_loss(logits: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -100,6 +100,22 @@ def _efficientnet_columns(pretrained: bool) -> nn.Module:
     return ColumnFeatures(_efficientnet(pretrained))
 
 
+GRID_ROWS = 4  # the last block map's height at 128 px: every cell kept
+
+
+class GridFeatures(ColumnFeatures):
+    """The last block map averaged into GRID_ROWS × COLUMNS cells (at 128 px: the map itself): where an
+    obstacle stands in the image, across and up (a near pillar's foot sits low), not only across."""
+
+    def features(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 3, H, W) → (B, 320 · GRID_ROWS · COLUMNS), channel-major, rows top first."""
+        return F.adaptive_avg_pool2d(self.net.block_map(images), (GRID_ROWS, COLUMNS)).flatten(1)
+
+
+def _efficientnet_grid(pretrained: bool) -> nn.Module:
+    return GridFeatures(_efficientnet(pretrained))
+
+
 def _mobilenet(pretrained: bool) -> nn.Module:
     # No MobileNet-v1 weights exist offline: always random init, trained with the head.
     return MobileNetV1()
@@ -115,6 +131,10 @@ TRUNKS: dict[str, TrunkSpec] = {
     # cannot disturb its statistics. Images every step: a GPU job.
     "efficientnet_lite0_columns_tuned": TrunkSpec(
         _efficientnet_columns, LITE0_STAGES[-1].out_ch * COLUMNS, frozen=False
+    ),
+    # Rows as well as columns (docs/design.md#trunk): 4× the feature, so pair it with a narrower head.
+    "efficientnet_lite0_grid": TrunkSpec(
+        _efficientnet_grid, LITE0_STAGES[-1].out_ch * GRID_ROWS * COLUMNS, frozen=True
     ),
     "mobilenet_v1_025": TrunkSpec(_mobilenet, MOBILENET_DIM, frozen=False),  # the paper's, from scratch
 }

@@ -52,8 +52,8 @@ from depthq.nets.checkpoint import (
     weights_bytes,
 )
 from depthq.nets.checkpoint import write_config as write_record
-from depthq.nets.heads import HeadConfig, QNet, build_head
-from depthq.nets.trunk import TRUNKS, build_trunk
+from depthq.nets.heads import QNet, build_head
+from depthq.nets.trunk import build_trunk
 from depthq.sim.sensors import BinConfig
 from depthq.train.config import TrainConfig
 
@@ -71,16 +71,10 @@ class TrainState:
     best: dict[str, float] | None = None
 
 
-def head_config(config: TrainConfig) -> HeadConfig:
-    feature_dim = TRUNKS[config.trunk].feature_dim
-    return HeadConfig(config.model, feature_dim, dropout=config.dropout, action_scale=config.action_scale,
-                      lookahead=config.lookahead, feature_projection=config.feature_projection)
-
-
 def build_qnet(config: TrainConfig) -> QNet:
     """The network `config` trains: its trunk (pretrained if it has weights) and a fresh head (its
     feature projection, if any, not fitted yet: `depthq.train.trainer` fits it)."""
-    return QNet(build_trunk(config.trunk), build_head(head_config(config)))
+    return QNet(build_trunk(config.trunk), build_head(config.head()))
 
 
 def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
@@ -150,7 +144,7 @@ def write_config(
         rate, bins = env["world"]["decision_hz"], env["bins"]
     policy = PolicyRecord(float(rate), (height, width), ACTIONS, RULE_OF[config.model], bins)
     where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env)
-    write_record(out, to_dict(config), head_config(config), config.learning_rate, where, policy, threads)
+    write_record(out, to_dict(config), config.head(), config.learning_rate, where, policy, threads)
 
 
 def save_epoch(

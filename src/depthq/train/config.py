@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+from depthq.configio import OMIT_DEFAULT
 from depthq.data import DataConfig
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import SELECT
-from depthq.nets.heads import HEAD_KINDS
+from depthq.nets.heads import HEAD_KINDS, HeadConfig
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
@@ -96,6 +97,17 @@ class TrainConfig:
     # when it starts. The paper's head took 256 (257 → 4096 with the action), ours 1280: 5× the first
     # layer's arithmetic. 0 (the default until measured on val canyons): no projection.
     feature_projection: int = 0
+    # Width of the head's hidden layer (the paper's 4096); its first layer is most of a head step's
+    # arithmetic.
+    hidden: int = field(default=4096, metadata=OMIT_DEFAULT)
+    # Depth-Q-Net's head form (`depthq.nets.heads.HEAD_FORMS`): "concat", the action appended to the
+    # feature (the paper's), or "per_action", the bins of each anchor action from one hidden pass.
+    head_form: str = field(default="concat", metadata=OMIT_DEFAULT)
+    # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
+    # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
+    # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
+    # greedy policy's future, discounted (a safety Bellman equation). 0: the paper's one-step target.
+    bootstrap: float = field(default=0.0, metadata=OMIT_DEFAULT)
     # Labels (`depthq.data.labels`); the defaults are the original's.
     horizon: int = HORIZON
     min_frames: int = MIN_FRAMES
@@ -152,6 +164,9 @@ class TrainConfig:
         if self.trunk not in TRUNKS:
             raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
         self._check_projection()
+        _int_at_least("hidden", self.hidden, 1)
+        self.head()  # the head's own rules (form, lookahead, projection size)
+        self._check_bootstrap()
         if self.depth_loss not in DEPTH_LOSSES:
             raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
         if self.select not in SELECT:
@@ -174,6 +189,22 @@ class TrainConfig:
                 f"train.feature_projection must be in 1..{trunk.feature_dim} (trunk {self.trunk!r}'s "
                 f"feature size) or 0, got {p}"
             )
+
+    def _check_bootstrap(self) -> None:
+        g = self.bootstrap
+        if isinstance(g, bool) or not isinstance(g, int | float) or not 0 <= g < 1:
+            raise ConfigError(f"train.bootstrap must be in [0, 1) (0: the one-step target), got {g!r}")
+        if g and (self.model != "depth" or self.lookahead != 1 or not TRUNKS[self.trunk].frozen):
+            raise ConfigError(
+                f"train.bootstrap {g}: a one-step Depth-Q-Net on a frozen trunk's cached features only "
+                f"(model {self.model!r}, lookahead {self.lookahead}, trunk {self.trunk!r}); use 0"
+            )
+
+    def head(self) -> HeadConfig:
+        """The head this training builds."""
+        return HeadConfig(self.model, TRUNKS[self.trunk].feature_dim, hidden=self.hidden,
+                          dropout=self.dropout, action_scale=self.action_scale, lookahead=self.lookahead,
+                          feature_projection=self.feature_projection, form=self.head_form)
 
     def _check_snapshots(self) -> None:
         if not isinstance(self.snapshots, tuple):

@@ -26,15 +26,18 @@ from depthq.train.features import FeatureTable
 @dataclass(frozen=True)
 class Batch:
     """Model inputs (features (B, D) or images (B, 3, S, S)), actions (B,), targets (B, bins) or (B,);
-    a lookahead Depth-Q-Net's: actions (B, K), targets (B, K, bins) (NaN on masked steps)."""
+    a lookahead Depth-Q-Net's: actions (B, K), targets (B, K, bins) (NaN on masked steps).
+    `next_inputs`: the next frame's features (B, D), for a bootstrapped target; else None."""
 
     inputs: torch.Tensor
     actions: torch.Tensor
     targets: torch.Tensor
+    next_inputs: torch.Tensor | None = None
 
     def to(self, device: torch.device) -> Batch:
         """The batch on `device` (a no-op on the CPU, where samples live)."""
-        return Batch(self.inputs.to(device), self.actions.to(device), self.targets.to(device))
+        following = None if self.next_inputs is None else self.next_inputs.to(device)
+        return Batch(self.inputs.to(device), self.actions.to(device), self.targets.to(device), following)
 
 
 class Samples(ABC):
@@ -56,14 +59,20 @@ class Samples(ABC):
 
 
 class FeatureSamples(Samples):
-    """Samples whose trunk features are cached: the head is all that runs."""
+    """Samples whose trunk features are cached: the head is all that runs. With `following`, each
+    batch carries its samples' next frames' features too (a one-step sample's next frame always exists)."""
 
-    def __init__(self, arrays: dict[str, np.ndarray], table: FeatureTable, split: str) -> None:
+    def __init__(
+        self, arrays: dict[str, np.ndarray], table: FeatureTable, split: str, following: bool = False
+    ) -> None:
         super().__init__(arrays)
         self.features = table.gather(split, arrays)
+        following_rows = {**arrays, "frame_id": arrays["frame_id"] + 1}
+        self.following = table.gather(split, following_rows) if following else None
 
     def batch(self, idx: torch.Tensor) -> Batch:
-        return Batch(self.features[idx].float(), self.actions[idx], self.targets[idx])
+        following = None if self.following is None else self.following[idx].float()
+        return Batch(self.features[idx].float(), self.actions[idx], self.targets[idx], following)
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)

@@ -5,10 +5,12 @@ checkpoint every epoch.
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +23,13 @@ from depthq.data.manifest import Dataset
 from depthq.data.views import CollView, DepthView, view_arrays
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import QNet
+from depthq.nets.heads import Head, QNet
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss, lookahead_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.parallel import cores
 from depthq.train import checkpoint
+from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
 from depthq.train.features import dataset_fingerprint, load_features
 from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
@@ -76,16 +79,20 @@ def train(
         # never the validation split's.
         model.head.fit_projection(train_set.features.numpy())
 
+    target_head = None  # a bootstrapped target's network Q̄: the previous epoch's head, from epoch 2 on
     tb = SummaryWriter(out / "tb", purge_step=state.epoch + 1)
     bar = tqdm(total=config.epochs, initial=state.epoch, desc=f"train {config.model}", unit="epoch",
                disable=not progress)
     try:
         for epoch in range(state.epoch + 1, config.epochs + 1):
             start = time.perf_counter()
+            if config.bootstrap and epoch > 1:
+                target_head = copy.deepcopy(model.head).eval()
             model.train()
             train_losses = []
             for _ in range(config.train_batches):
                 batch = train_set.batch(train_set.draw(config.batch_size, rng)).to(where)
+                batch = with_target(batch, target_head, config.bootstrap)
                 train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer, config.precision))
                 _check_finite(train_losses[-1], "training", epoch, out, state)
 
@@ -93,7 +100,7 @@ def train(
             val_losses, val_stds = [], []
             with torch.no_grad():
                 for idx in val_batches:
-                    batch = val_set.batch(idx).to(where)
+                    batch = with_target(val_set.batch(idx).to(where), target_head, config.bootstrap)
                     pred = predict(model, val_set, batch, config.precision)
                     loss, per_sample = loss_fn(pred, batch.targets)
                     val_losses.append(loss.item())
@@ -129,6 +136,14 @@ def loss_function(config: TrainConfig) -> LossFn:
     return functools.partial(depth_l1_loss, reduction=config.depth_loss)
 
 
+def with_target(batch: Batch, target_head: Head | None, gamma: float) -> Batch:
+    """`batch` with its bootstrapped targets (`depthq.train.bootstrap`) once a target network exists."""
+    if target_head is None:
+        return batch
+    targets = bootstrapped_targets(batch.targets, target_head, batch.next_inputs, gamma)
+    return replace(batch, targets=targets)
+
+
 def predict(model: QNet, samples: Samples, batch: Batch, precision: str = "fp32") -> torch.Tensor:
     """The model's float32 outputs for `batch`; "bf16" runs the forward pass under bfloat16 autocast, and
     the loss is then taken of its outputs in float32 (elementwise ops in bf16 would round the loss)."""
@@ -162,7 +177,9 @@ def _samples(
                   for split, n in (("train", config.runs), ("val", None))}
         _check_labels(config, arrays["train"]["target"])
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
-        return FeatureSamples(arrays["train"], table, "train"), FeatureSamples(arrays["val"], table, "val")
+        following = config.bootstrap > 0
+        return (FeatureSamples(arrays["train"], table, "train", following),
+                FeatureSamples(arrays["val"], table, "val", following))
     view = DepthView if config.model == "depth" else CollView
     train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead)
     _check_labels(config, train_view.arrays["target"])
