@@ -256,3 +256,42 @@ def test_devices_resolve_or_fail_by_name():
     if not torch.cuda.is_available():
         with pytest.raises(ConfigError, match="sees no CUDA GPU"):
             resolve_device("cuda:0")
+
+
+def test_relative_depth_loss_divides_each_error_by_its_target_by_hand():
+    nan = math.nan
+    pred = torch.tensor([[1.0, 1.0, 1.0], [0.1, 0.5, 0.5]], requires_grad=True)
+    target = torch.tensor([[0.5, 1.5, nan], [0.01, 2.0, 1.0]])  # 0.01 m: divided by the floor, 0.05
+    loss, per_sample = depth_l1_loss(pred, target, reduction="relative")
+    first, second = (0.5 / 0.5 + 0.5 / 1.5) / 2, (0.09 / 0.05 + 0.5 / 1.0) / 2
+    torch.testing.assert_close(per_sample, torch.tensor([first, second]))
+    torch.testing.assert_close(loss, torch.tensor((1.0 + 1 / 3 + 1.8 + 0.5) / 4))
+    loss.backward()
+    assert torch.isfinite(pred.grad).all() and pred.grad[1, 1] == 0
+
+
+def test_a_per_action_head_predicts_each_anchor_and_blends_between():
+    torch.manual_seed(0)
+    head = build_head(HeadConfig("depth", 32, hidden=16, form="per_action")).eval()
+    assert head.hidden.in_features == 32 and head.output.out_features == 3 * 26  # the action is no input
+    feature = torch.randn(1, 32).repeat(5, 1)
+    out = head(feature, torch.tensor([-1.0, -0.5, 0.0, 1.0, 3.0]))
+    anchors = torch.relu(head.output(torch.relu(head.hidden(feature[:1])))).reshape(3, 26)
+    torch.testing.assert_close(out[[0, 2, 3]], anchors)
+    torch.testing.assert_close(out[1], (anchors[0] + anchors[1]) / 2)
+    torch.testing.assert_close(out[4], anchors[2])  # beyond the anchors: clipped to the last
+    for bad in ({"kind": "coll"}, {"lookahead": 2}, {"form": "dueling"}):
+        with pytest.raises(ConfigError, match="form"):
+            HeadConfig(**{"kind": "depth", "feature_dim": 32, "form": "per_action", **bad})
+
+
+def test_the_grid_feature_keeps_rows_and_columns_of_the_block_map():
+    trunk = build_trunk("efficientnet_lite0_grid")
+    columns = build_trunk(DEFAULT_TRUNK)
+    assert trunk.frozen and trunk.feature_dim == 320 * 4 * COLUMNS
+    frame = preprocess(skimage.data.chelsea())
+    with torch.inference_mode():
+        grid = trunk(frame).reshape(320, 4, COLUMNS)
+        # the columns' feature is the grid averaged over its rows
+        torch.testing.assert_close(grid.mean(dim=1).flatten(), columns(frame)[0], rtol=1e-5, atol=1e-5)
+        assert (grid[:, 0] - grid[:, 3]).abs().mean() > 0.1  # top and bottom rows differ

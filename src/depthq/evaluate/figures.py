@@ -77,3 +77,33 @@ def plot_fig4(snaps: list[dict[str, Any]], run: dict[str, Any], policy: dict[str
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def plot_agreement(arrays: dict[str, np.ndarray], summary: dict[str, Any], path: Path) -> None:
+    """A policy against an oracle along its own runs (`depthq.evaluate.oracle.agreement`): the share of
+    decisive steps where it took the oracle's action, by seconds before the run's collision; and which
+    action it took against the oracle's in the last seconds before one."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.6), gridspec_kw={"width_ratios": [1.6, 1]})
+    hz, decisive, agrees = summary["decision_hz"], arrays["decisive"], arrays["agrees"]
+    before = arrays["to_collision_s"]
+    steps = np.arange(1, int(4 * hz) + 1) / hz  # the last 4 s, one point per decision
+    shares = [agrees[decisive & np.isclose(before, s)].mean() if (decisive & np.isclose(before, s)).any()
+              else np.nan for s in steps]
+    left.plot(-steps, shares, "o-", label="runs that end in a collision")
+    left.axhline(summary["agreement_decisive"], color="k", ls="--", label="all decisive steps")
+    left.axhline(1 / 3, color="grey", ls=":", label="chance (3 actions)")
+    left.set(xlabel="seconds before the collision", ylabel="takes the oracle's action", ylim=(0, 1),
+             title=f"{summary['policy']} vs oracle {summary['oracle']}")
+    left.legend(fontsize=8)
+    late = before <= 2.0
+    actions = (-1.0, 0.0, 1.0)
+    counts = np.array([[np.sum(late & np.isclose(arrays["oracle"], o) & np.isclose(arrays["policy"], p))
+                        for p in actions] for o in actions])
+    right.imshow(counts, cmap="Blues")
+    for (i, j), n in np.ndenumerate(counts):
+        right.text(j, i, str(n), ha="center", va="center")
+    right.set(xticks=range(3), yticks=range(3), xticklabels=actions, yticklabels=actions,
+              xlabel="policy's action", ylabel="oracle's action", title="last 2 s before a collision")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -5,9 +5,11 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
 - `stats`: OU exploration runs without a camera (the LiDAR decides when a run ends), at each
   candidate decision rate: frames per kept run, the share of runs kept, and the samples that
   Table II's sizes would get, next to the paper's. This is how the decision rate is calibrated.
-- `oracle`: the selection rule (docs/design.md#action-selection) fed with the simulator's true next
-  bins for each candidate action (a perfect Depth-Q-Net), driven in `val` canyons: what the rule can reach at
-  a rate, whatever the network.
+- `oracle`: a perfect predictor of a training signal with its selection rule (`depthq.evaluate.oracle`:
+  by default the true next bins of each candidate action, a perfect Depth-Q-Net), driven in `val`
+  canyons: what the signal can reach at a rate, whatever the network.
+- `agreement`: for evaluation folders, how often their policy took the oracle's action along its own
+  runs (`depthq.evaluate.oracle.agreement`), with per-step arrays and a figure.
 - `dqn`: a small dataset collected at a rate, one Depth-Q-Net trained on it and driven in `val`
   canyons (at the data's rate): the end-to-end check, in a few minutes.
 """
@@ -23,23 +25,19 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from depthq.control.action_selection import select_depth_action
 from depthq.data.collect import CollectConfig, collect, collect_run, exploration_env
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.data.stats import PAPER_TABLE2
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
-from depthq.evaluate.metrics import SUCCESS_DISTANCE
-from depthq.sim.canyon import FAMILIES, split_family
-from depthq.sim.env import CanyonEnv, EnvConfig
-from depthq.sim.sensors import depth_bins, finish_scan
-from depthq.sim.world import WorldConfig, world_for
+from depthq.evaluate.figures import plot_agreement
+from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
+from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
 from depthq.train.trainer import train
 
-PARTS = ("stats", "oracle", "dqn")
+PARTS = ("stats", "oracle", "dqn", "agreement")
 VAL_CANYONS = "val:1000-1019"  # far from the validation runs' canyons (val:0..89)
-ACTIONS = np.array([-1.0, 0.0, 1.0])
 PAPER_FRAMES_PER_RUN = sum(s for s, _ in PAPER_TABLE2.values()) / sum(PAPER_TABLE2) + 1
 
 
@@ -77,42 +75,6 @@ def ou_statistics(
     }
 
 
-def oracle_drive(decision_hz: float, canyons: str = VAL_CANYONS, time_limit_s: float | None = None) -> dict:
-    """The one-step oracle (true next bins for −1, 0, +1; max-min rule) in `canyons` (their family's
-    time limit by default)."""
-    family = split_family(canyons)[0]
-    limit = FAMILIES[family].time_limit_s if time_limit_s is None else time_limit_s
-    world = world_for(WorldConfig(decision_hz=decision_hz), family)
-    env = CanyonEnv(EnvConfig(world=world, time_limit_s=limit), camera=False)
-    world, distances = env.world, []
-    exact, rng = replace(env.config.world.lidar, noise_std=0.0), np.random.default_rng(0)
-    try:
-        for k, canyon in enumerate(parse_canyon_set(canyons)):
-            _, info = env.reset(seed=k, options={"canyon": canyon})
-            done = False
-            while not done:
-                pose = world.pose
-                preds = []
-                for a in ACTIONS:
-                    world.place(*pose)
-                    world.advance(float(a))
-                    preds.append(depth_bins(finish_scan(world.raycast(), exact, rng), env.config.bins))
-                world.place(*pose)
-                _, _, terminated, truncated, info = env.step([select_depth_action(np.array(preds), ACTIONS)])
-                done = terminated or truncated
-            distances.append(info["distance"])
-    finally:
-        env.close()
-    d = np.array(distances)
-    return {
-        "decision_hz": decision_hz,
-        "canyons": canyons,
-        "distance_mean": float(d.mean()),
-        "successes": int((d > SUCCESS_DISTANCE).sum()),
-        "distances": [round(float(x), 2) for x in d],
-    }
-
-
 def small_dqn(
     decision_hz: float, out: Path, runs: int, canyons: str = VAL_CANYONS, epochs: int = DEFAULT_EPOCHS
 ) -> dict:
@@ -140,9 +102,12 @@ def probe(
     canyons: str = VAL_CANYONS,
     epochs: int = DEFAULT_EPOCHS,
     family: str = "paper",
+    oracles: tuple[Oracle, ...] = (Oracle(),),
+    evaluations: tuple[Path, ...] = (),
 ) -> dict[str, Any]:
     """Run the chosen parts at each rate; returns (and the CLI writes) everything measured. `family`:
-    the canyon family of the OU statistics (the oracle and the small net drive in `canyons`)."""
+    the canyon family of the OU statistics (the oracle and the small net drive in `canyons`);
+    `oracles`: those the oracle and agreement parts use; `evaluations`: the agreement part's folders."""
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
         raise ConfigError(f"unknown probe part(s) {unknown}; expected some of {PARTS}")
@@ -150,12 +115,27 @@ def probe(
     if "stats" in parts:
         result["stats"] = _parallel(ou_statistics, [(hz, stats_runs, 0, None, family) for hz in rates])
     if "oracle" in parts:
-        result["oracle"] = _parallel(oracle_drive, [(hz, canyons) for hz in rates])
+        names = [str(c) for c in parse_canyon_set(canyons)]
+        result["oracle"] = _parallel(drive_oracle, [(o, names, hz) for hz in rates for o in oracles])
+    if "agreement" in parts:
+        if not evaluations:
+            raise ConfigError("probe part 'agreement' needs evaluation folders (--evals)")
+        result["agreement"] = [measure_agreement(e, o, out) for e in evaluations for o in oracles]
     if "dqn" in parts:
         result["dqn"] = {
             f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons, epochs) for hz in rates
         }
     return result
+
+
+def measure_agreement(folder: Path, oracle: Oracle, out: Path) -> dict[str, Any]:
+    """`agreement` of one evaluation; its per-step arrays and figure go to OUT/agreement/<name>_<oracle>."""
+    summary, arrays = agreement(folder, oracle)
+    stem = out / "agreement" / f"{Path(folder).name}_{str(oracle).replace(':', '-')}"
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(stem.with_suffix(".npz"), **arrays)
+    plot_agreement(arrays, summary, stem.with_suffix(".png"))
+    return summary
 
 
 def format_stats(rows: list[dict]) -> str:

@@ -19,7 +19,14 @@ def _rates(text: str) -> tuple[float, ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hz", default="4", help="candidate decision rates, comma-separated, e.g. 10,5,4")
-    p.add_argument("--parts", default="stats,oracle,dqn", help="some of stats, oracle, dqn")
+    p.add_argument("--parts", default="stats,oracle,dqn",
+                   help="some of stats, oracle, dqn, agreement (see depthq.report.probe)")
+    p.add_argument("--oracle", default="depth:1",
+                   help="oracles of the oracle and agreement parts, comma-separated: depth:K[:RULE] (the "
+                   "true bins 1..K frames ahead of each action held) or coll:K (a bump within K frames)")
+    p.add_argument("--evals", default="",
+                   help="evaluation folders (depthq evaluate's --out) for the agreement part, "
+                   "comma-separated")
     p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
     p.add_argument("--runs", type=int, default=200, help="training runs of the small Depth-Q-Net")
     p.add_argument("--epochs", type=int, default=40, help="training epochs of the small Depth-Q-Net")
@@ -36,17 +43,26 @@ def run(args: argparse.Namespace) -> int:
 
     if split_family(args.canyons)[1].startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")
+    from depthq.evaluate.oracle import Oracle
+
     parts = tuple(args.parts.split(","))
-    result = probe(
-        _rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs, args.family
-    )
+    oracles = tuple(Oracle.parse(text) for text in args.oracle.split(","))
+    evaluations = tuple(Path(text) for text in args.evals.split(",") if text)
+    result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs,
+                   args.family, oracles, evaluations)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "probe.json").write_text(json.dumps(result, indent=1))
     if "stats" in result:
         print(format_stats(result["stats"]))
     for row in result.get("oracle", []):
-        print(f"oracle at {row['decision_hz']:g} Hz in {row['canyons']}: {row['successes']}/20, "
-              f"{row['distance_mean']:.2f} m")
+        print(f"oracle {row['oracle']} at {row['decision_hz']:g} Hz in {args.canyons}: ends reached "
+              f"{row['reached_end']}/{row['canyons']}, successes {row['successes']}, progress "
+              f"{row['progress_mean']:.2f} m")
+    for row in result.get("agreement", []):
+        print(f"{row['policy']} vs oracle {row['oracle']}: agrees on {row['agreement_decisive']:.0%} of "
+              f"{row['decisive_steps']} decisive steps, {row['agreement_before_collision'] or 0:.0%}"
+              f" in the last 2 s before its {row['collisions']} collisions ({row['collisions_with_pillar']} "
+              f"with a pillar); {row['distance_to_collision_mean']:.2f} m to the first collision")
     for hz, s in result.get("dqn", {}).items():
         print(f"Depth-Q-Net on {args.runs} runs at {hz} Hz in {args.canyons}: {s['successes']}/{s['runs']}, "
               f"{s['distance_mean']:.2f} m")

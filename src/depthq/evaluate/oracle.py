@@ -1,0 +1,239 @@
+"""Oracles: the selection rules fed with the simulator's truth, and how often a policy agrees with them
+along its own runs (docs/design.md#oracles).
+
+An `Oracle` is a perfect predictor of a training signal, turned into an action by the rule a learned
+net of that signal uses:
+
+- `depth`, lookahead K: the noise-free depth bins 1 … K frames ahead of each candidate action held
+  (K = 1: Depth-Q-Net's target), scored by the selection rule (`Selection`: the farthest nearest bin;
+  for K > 1 its steps combined by the discounted mean or the minimum);
+- `coll`, lookahead K: whether holding the action bumps within K frames (Coll-Q-Net's label at
+  horizon K), the lowest wins; ties go straight, as the networks' rule.
+
+`drive_oracle` drives one in canyons: what the signal can reach at a rate, whatever the network.
+`agreement` re-simulates every step of an evaluation's runs from the robot's recorded pose and asks
+the oracle which action it would take there: overall, on decisive steps (where the oracle's choice
+matters), and in the last seconds before each collision. Nothing here needs the policy itself, so
+it works on any evaluation folder.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from depthq.control.action_selection import ACTIONS, TIE_TOL, Selection, pick_best, sequence_scores
+from depthq.errors import ConfigError
+from depthq.evaluate.metrics import SUCCESS_DISTANCE
+from depthq.sim.canyon import FAMILIES, CanyonId, nearest_on_polyline
+from depthq.sim.env import COLLISIONS, CanyonEnv, EnvConfig
+from depthq.sim.sensors import bump, depth_bins, finish_scan
+from depthq.sim.world import WorldConfig, world_for
+
+SIGNALS = ("depth", "coll")
+DECISIVE_M = 0.01  # a depth oracle's step is decisive when its best and worst candidates differ by more
+BEFORE_COLLISION_S = 2.0  # "the last seconds before a collision"
+
+
+@dataclass(frozen=True)
+class Oracle:
+    """A perfect predictor of `signal` ("depth" or "coll") `lookahead` frames ahead, with the rule
+    that picks an action from it (`selection`: a depth oracle's, for K > 1)."""
+
+    signal: str = "depth"
+    lookahead: int = 1
+    selection: Selection = field(default_factory=Selection)
+
+    def __post_init__(self) -> None:
+        if self.signal not in SIGNALS:
+            raise ConfigError(f"oracle signal must be one of {SIGNALS}, got {self.signal!r}")
+        k = self.lookahead
+        if isinstance(k, bool) or not isinstance(k, int) or k < 1:
+            raise ConfigError(f"oracle lookahead must be an integer >= 1, got {k!r}")
+
+    @classmethod
+    def parse(cls, text: str) -> Oracle:
+        """'depth', 'depth:3', 'depth:3:farthest_nearest_bin' or 'coll:5' (lookahead 1 if not given)."""
+        signal, _, rest = text.partition(":")
+        lookahead, _, rule = rest.partition(":")
+        try:
+            k = int(lookahead) if lookahead else 1
+        except ValueError:
+            raise ConfigError(f"oracle {text!r}: lookahead must be an integer, e.g. depth:3") from None
+        if rule and signal != "depth":
+            raise ConfigError(f"oracle {text!r}: only a depth oracle takes a rule")
+        return cls(signal, k, Selection(rule) if rule else Selection())
+
+    def __str__(self) -> str:
+        rule = f":{self.selection.rule}" if self.signal == "depth" and self.lookahead > 1 else ""
+        return f"{self.signal}:{self.lookahead}{rule}"
+
+
+class OracleWorld:
+    """A noise-free copy of an evaluation's world, to try each candidate from a pose."""
+
+    def __init__(self, config: EnvConfig) -> None:
+        self.env = CanyonEnv(config, camera=False)
+        self.exact = replace(config.world.lidar, noise_std=0.0)
+        self.rng = np.random.default_rng(0)  # finish_scan's noise is off: unused
+
+    def load(self, canyon: str) -> None:
+        self.env.reset(seed=0, options={"canyon": canyon})
+
+    def scores(self, oracle: Oracle, pose: np.ndarray) -> np.ndarray:
+        """The oracle's score of each of ACTIONS from `pose` (depth: higher is better; coll: 0 or 1)."""
+        world, config = self.env.world, self.env.config
+        preds, bumped = [], []
+        for action in ACTIONS:
+            world.place(*pose)
+            steps, hit = [], False
+            for _ in range(oracle.lookahead):
+                contact = world.advance(float(action))
+                scan = finish_scan(world.raycast(), self.exact, self.rng)
+                steps.append(depth_bins(scan, config.bins))
+                hit = hit or contact or bump(scan, config.bump)
+                if contact:  # the robot stops at a contact: the later steps see what it sees now
+                    steps += [steps[-1]] * (oracle.lookahead - len(steps))
+                    break
+            preds.append(steps)
+            bumped.append(hit)
+        world.place(*pose)
+        if oracle.signal == "coll":
+            return np.array(bumped, np.float64)
+        return sequence_scores(np.array(preds), oracle.selection)
+
+    def choose(self, oracle: Oracle, pose: np.ndarray) -> tuple[float, np.ndarray]:
+        """The oracle's action at `pose` and its scores."""
+        scores = self.scores(oracle, pose)
+        return pick_best(scores, np.array(ACTIONS), maximise=oracle.signal == "depth"), scores
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def env_config(canyons: list[str], decision_hz: float, time_limit_s: float | None = None) -> EnvConfig:
+    """The evaluation env of `canyons` (one family) at `decision_hz`: the family's world and time limit."""
+    families = {CanyonId.parse(c).family for c in canyons}
+    if len(families) != 1:
+        raise ConfigError(f"oracle canyons must be of one family, got {sorted(families)}")
+    family = families.pop()
+    limit = FAMILIES[family].time_limit_s if time_limit_s is None else time_limit_s
+    return EnvConfig(world=world_for(WorldConfig(decision_hz=decision_hz), family), time_limit_s=limit)
+
+
+def drive_oracle(oracle: Oracle, canyons: list[str], decision_hz: float) -> dict[str, Any]:
+    """The oracle driven in `canyons` at `decision_hz`: progress, ends reached, collisions."""
+    sim = OracleWorld(env_config(canyons, decision_hz))
+    env, runs = sim.env, []
+    try:
+        for k, canyon in enumerate(canyons):
+            _, info = env.reset(seed=k, options={"canyon": canyon})
+            done = False
+            while not done:
+                action, _ = sim.choose(oracle, env.world.pose)
+                _, _, terminated, truncated, info = env.step([action])
+                done = terminated or truncated
+            runs.append({"canyon": canyon, "progress": info["progress"], "distance": info["distance"],
+                         "end_reason": info["end_reason"]})
+    finally:
+        sim.close()
+    progress = np.array([r["progress"] for r in runs])
+    return {
+        "oracle": str(oracle),
+        "decision_hz": decision_hz,
+        "canyons": len(canyons),
+        "progress_mean": float(progress.mean()),
+        "reached_end": sum(r["end_reason"] == "end" for r in runs),
+        "collisions": sum(r["end_reason"] in COLLISIONS for r in runs),
+        "successes": sum(r["distance"] > SUCCESS_DISTANCE for r in runs),
+        "runs": runs,
+    }
+
+
+def _obstacle_kind(canyon_id: str, family_config: Any, xy: np.ndarray) -> str:
+    """'pillar' when the nearest obstacle at `xy` is a pillar's surface, else 'wall'."""
+    from depthq.sim.canyon import generate_canyon
+
+    canyon = generate_canyon(CanyonId.parse(canyon_id), family_config)
+    wall = min(float(nearest_on_polyline(line, xy[None])[0][0]) for line in (canyon.left, canyon.right))
+    if not len(canyon.obstacles):
+        return "wall"
+    pillar = float((np.hypot(*(canyon.obstacles[:, :2] - xy).T) - canyon.obstacles[:, 2]).min())
+    return "pillar" if pillar < wall else "wall"
+
+
+def agreement(folder: Path, oracle: Oracle = Oracle()) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """How often the policy of the evaluation in `folder` took the oracle's action along its own runs.
+
+    Returns the summary (steps, agreement overall, on decisive steps, in the last BEFORE_COLLISION_S
+    before each collision, and what each collision hit) and per-step arrays: canyon index, step, the
+    policy's and the oracle's actions, the oracle's scores, decisive, agrees, seconds to the collision
+    (inf where the run did not end in one). A policy's action agrees when the oracle scores it within
+    the tie tolerance of its best (continuous actions are taken as the nearest candidate)."""
+    folder = Path(folder)
+    try:
+        summary = json.loads((folder / "summary.json").read_text())
+        with (folder / "runs.csv").open() as f:
+            records = list(csv.DictReader(f))
+        trajectories = np.load(folder / "trajectories.npz")
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"{folder}: not a complete evaluation folder ({err})") from None
+    hz = float(summary["config"]["decision_hz"])
+    canyons = [r["canyon"] for r in records]
+    sim = OracleWorld(env_config(canyons, hz))
+    candidates = np.array(ACTIONS)
+    rows: dict[str, list] = {k: [] for k in ("canyon", "step", "policy", "oracle", "scores", "decisive",
+                                             "agrees", "to_collision_s")}
+    hits = []
+    try:
+        for c, record in enumerate(records):
+            key = record["canyon"].replace(":", "_").replace("/", "_")
+            poses, actions = trajectories[f"{key}_poses"], trajectories[f"{key}_actions"]
+            sim.load(record["canyon"])
+            collided = record["end_reason"] in COLLISIONS
+            if collided:
+                hits.append(_obstacle_kind(record["canyon"], sim.env.world.config.canyon, poses[-1, :2]))
+            for t, action in enumerate(actions):
+                choice, scores = sim.choose(oracle, poses[t].astype(np.float64))
+                taken = int(np.abs(candidates - action).argmin())
+                best = scores.max() if oracle.signal == "depth" else scores.min()
+                spread = scores.max() - scores.min()
+                rows["canyon"].append(c)
+                rows["step"].append(t)
+                rows["policy"].append(float(action))
+                rows["oracle"].append(choice)
+                rows["scores"].append(scores)
+                rows["decisive"].append(spread > (DECISIVE_M if oracle.signal == "depth" else 0.5))
+                rows["agrees"].append(abs(scores[taken] - best) <= TIE_TOL)
+                rows["to_collision_s"].append((len(actions) - t) / hz if collided else np.inf)
+    finally:
+        sim.close()
+    arrays = {k: np.array(v) for k, v in rows.items()}
+    decisive, agrees = arrays["decisive"], arrays["agrees"]
+    late = arrays["to_collision_s"] <= BEFORE_COLLISION_S
+
+    def share(mask: np.ndarray) -> float | None:
+        return float(agrees[mask].mean()) if mask.any() else None
+
+    return {
+        "evaluation": str(folder),
+        "policy": summary["policy"].get("policy"),
+        "oracle": str(oracle),
+        "decision_hz": hz,
+        "steps": len(agrees),
+        "agreement": share(np.ones_like(agrees)),
+        "decisive_steps": int(decisive.sum()),
+        "agreement_decisive": share(decisive),
+        "steps_before_collision": int(late.sum()),
+        "agreement_before_collision": share(late),
+        "agreement_before_collision_decisive": share(late & decisive),
+        "collisions": len(hits),
+        "collisions_with_pillar": hits.count("pillar"),
+        "progress_mean": summary["summary"]["progress_mean"],
+        "distance_to_collision_mean": summary["summary"]["distance_to_collision_mean"],
+    }, arrays
