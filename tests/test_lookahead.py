@@ -19,6 +19,7 @@ from torch import nn
 
 from depthq.control.action_selection import (
     ACTIONS,
+    TIE_TOL,
     Selection,
     candidate_sequences,
     depth_scores,
@@ -170,7 +171,7 @@ def test_selection_at_lookahead_one_picks_what_the_one_step_rule_picks() -> None
         if trial % 3 == 0:  # ties and ReLU zeros, where the tie rule decides
             pred[rng.integers(3)] = pred[rng.integers(3)]
             pred[:, rng.integers(26)] = 0.0
-        today = pick_best(depth_scores(pred), np.asarray(ACTIONS), maximise=True)
+        today = pick_best(depth_scores(pred), np.asarray(ACTIONS), True, TIE_TOL["depth"])
         assert select_action("depth", pred, np.asarray(ACTIONS)) == today
         for selection in (Selection(rule="farthest_nearest_bin"), Selection(switch=True)):
             sequences = candidate_sequences(ACTIONS, 1, selection.switch)

@@ -69,16 +69,25 @@ class Oracle:
             raise ConfigError(f"oracle {text!r}: only a depth oracle takes a rule")
         return cls(signal, k, Selection(rule) if rule else Selection())
 
+    def score(self, bins: np.ndarray, bumped: np.ndarray) -> np.ndarray:
+        """Each candidate's score from its true bins (N, K, bins) and bump flags (N,)."""
+        return bumped.astype(np.float64) if self.signal == "coll" else sequence_scores(bins, self.selection)
+
+    def pick(self, scores: np.ndarray) -> float:
+        """The action its rule takes: the best score (depth: highest; coll: lowest), ties straight."""
+        return pick_best(scores, np.array(ACTIONS), self.signal == "depth", TIE_TOL[self.signal])
+
     def __str__(self) -> str:
         rule = f":{self.selection.rule}" if self.signal == "depth" and self.lookahead > 1 else ""
         return f"{self.signal}:{self.lookahead}{rule}"
 
 
 class OracleWorld:
-    """A noise-free copy of an evaluation's world, to try each candidate from a pose."""
+    """A noise-free copy of an evaluation's world, to try each candidate from a pose (and, with
+    `camera`, to render the frame a policy saw there)."""
 
-    def __init__(self, config: EnvConfig) -> None:
-        self.env = CanyonEnv(config, camera=False)
+    def __init__(self, config: EnvConfig, camera: bool = False) -> None:
+        self.env = CanyonEnv(config, camera=camera)
         self.exact = replace(config.world.lidar, noise_std=0.0)
         self.rng = np.random.default_rng(0)  # finish_scan's noise is off: unused
 
@@ -87,6 +96,11 @@ class OracleWorld:
 
     def scores(self, oracle: Oracle, pose: np.ndarray) -> np.ndarray:
         """The oracle's score of each of ACTIONS from `pose` (depth: higher is better; coll: 0 or 1)."""
+        return oracle.score(*self.truth(oracle, pose))
+
+    def truth(self, oracle: Oracle, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """From `pose`, each of ACTIONS held `oracle.lookahead` frames: the true bins (N, K, bins) and
+        whether it bumps (N,)."""
         world, config = self.env.world, self.env.config
         preds, bumped = [], []
         for action in ACTIONS:
@@ -103,14 +117,17 @@ class OracleWorld:
             preds.append(steps)
             bumped.append(hit)
         world.place(*pose)
-        if oracle.signal == "coll":
-            return np.array(bumped, np.float64)
-        return sequence_scores(np.array(preds), oracle.selection)
+        return np.array(preds), np.array(bumped)
+
+    def frame(self, pose: np.ndarray, seed: int) -> np.ndarray:
+        """The camera frame at `pose`, with pixel noise drawn from `seed`."""
+        self.env.world.place(*pose)
+        return self.env.world.image(np.random.default_rng(seed))
 
     def choose(self, oracle: Oracle, pose: np.ndarray) -> tuple[float, np.ndarray]:
         """The oracle's action at `pose` and its scores."""
         scores = self.scores(oracle, pose)
-        return pick_best(scores, np.array(ACTIONS), maximise=oracle.signal == "depth"), scores
+        return oracle.pick(scores), scores
 
     def close(self) -> None:
         self.env.close()
@@ -155,6 +172,19 @@ def drive_oracle(oracle: Oracle, canyons: list[str], decision_hz: float) -> dict
     }
 
 
+def _checkpoint_policy(summary: dict[str, Any]) -> Any:
+    """The evaluated checkpoint's policy with the evaluation's weights and selection rule."""
+    from depthq.control.qnet_policy import QNetPolicy
+
+    described, config = summary["policy"], summary["config"]
+    if not described.get("checkpoint"):
+        raise ConfigError(f"predictions need a checkpoint's evaluation; {described.get('policy')!r} is none")
+    selection = Selection(config.get("rule", "discounted_nearest_bin"), config.get("discount", 0.9),
+                          config.get("switch", False))
+    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), which=described.get("weights"),
+                                      selection=selection)
+
+
 def _obstacle_kind(canyon_id: str, family_config: Any, xy: np.ndarray) -> str:
     """'pillar' when the nearest obstacle at `xy` is a pillar's surface, else 'wall'."""
     from depthq.sim.canyon import generate_canyon
@@ -167,14 +197,19 @@ def _obstacle_kind(canyon_id: str, family_config: Any, xy: np.ndarray) -> str:
     return "pillar" if pillar < wall else "wall"
 
 
-def agreement(folder: Path, oracle: Oracle = Oracle()) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def agreement(
+    folder: Path, oracle: Oracle = Oracle(), predictions: bool = False
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """How often the policy of the evaluation in `folder` took the oracle's action along its own runs.
 
     Returns the summary (steps, agreement overall, on decisive steps, in the last BEFORE_COLLISION_S
     before each collision, and what each collision hit) and per-step arrays: canyon index, step, the
-    policy's and the oracle's actions, the oracle's scores, decisive, agrees, seconds to the collision
-    (inf where the run did not end in one). A policy's action agrees when the oracle scores it within
-    the tie tolerance of its best (continuous actions are taken as the nearest candidate)."""
+    policy's and the oracle's actions, the oracle's scores and true bins (steps, N, K, bins),
+    decisive, agrees, seconds to the collision (inf where the run did not end in one). A policy's
+    action agrees when the oracle scores it within the tie tolerance of its best (continuous actions
+    are taken as the nearest candidate). With `predictions`, a checkpoint's policy is shown the frame
+    rendered at each pose (its pixel noise drawn anew) and its values are kept too: `predicted`
+    (steps, N, …) and `predicted_scores` (steps, N) by its own rule."""
     folder = Path(folder)
     try:
         summary = json.loads((folder / "summary.json").read_text())
@@ -185,10 +220,12 @@ def agreement(folder: Path, oracle: Oracle = Oracle()) -> tuple[dict[str, Any], 
         raise ConfigError(f"{folder}: not a complete evaluation folder ({err})") from None
     hz = float(summary["config"]["decision_hz"])
     canyons = [r["canyon"] for r in records]
-    sim = OracleWorld(env_config(canyons, hz))
+    policy = _checkpoint_policy(summary) if predictions else None
+    sim = OracleWorld(env_config(canyons, hz), camera=policy is not None)
     candidates = np.array(ACTIONS)
-    rows: dict[str, list] = {k: [] for k in ("canyon", "step", "policy", "oracle", "scores", "decisive",
-                                             "agrees", "to_collision_s")}
+    rows: dict[str, list] = {k: [] for k in ("canyon", "step", "policy", "oracle", "scores", "true_bins",
+                                             "decisive", "agrees", "to_collision_s", "predicted",
+                                             "predicted_scores")}
     hits = []
     try:
         for c, record in enumerate(records):
@@ -199,7 +236,16 @@ def agreement(folder: Path, oracle: Oracle = Oracle()) -> tuple[dict[str, Any], 
             if collided:
                 hits.append(_obstacle_kind(record["canyon"], sim.env.world.config.canyon, poses[-1, :2]))
             for t, action in enumerate(actions):
-                choice, scores = sim.choose(oracle, poses[t].astype(np.float64))
+                pose = poses[t].astype(np.float64)
+                true_bins, bumped = sim.truth(oracle, pose)
+                scores = oracle.score(true_bins, bumped)
+                choice = oracle.pick(scores)
+                if policy is not None:
+                    values = policy.values(sim.frame(pose, seed=t))
+                    rows["predicted"].append(values)
+                    rows["predicted_scores"].append(
+                        sequence_scores(values, policy.selection) if policy.kind == "depth" else values)
+                rows["true_bins"].append(true_bins)
                 taken = int(np.abs(candidates - action).argmin())
                 best = scores.max() if oracle.signal == "depth" else scores.min()
                 spread = scores.max() - scores.min()
@@ -209,11 +255,11 @@ def agreement(folder: Path, oracle: Oracle = Oracle()) -> tuple[dict[str, Any], 
                 rows["oracle"].append(choice)
                 rows["scores"].append(scores)
                 rows["decisive"].append(spread > (DECISIVE_M if oracle.signal == "depth" else 0.5))
-                rows["agrees"].append(abs(scores[taken] - best) <= TIE_TOL)
+                rows["agrees"].append(abs(scores[taken] - best) <= TIE_TOL[oracle.signal])
                 rows["to_collision_s"].append((len(actions) - t) / hz if collided else np.inf)
     finally:
         sim.close()
-    arrays = {k: np.array(v) for k, v in rows.items()}
+    arrays = {k: np.array(v) for k, v in rows.items() if v}
     decisive, agrees = arrays["decisive"], arrays["agrees"]
     late = arrays["to_collision_s"] <= BEFORE_COLLISION_S
 

@@ -104,10 +104,12 @@ def probe(
     family: str = "paper",
     oracles: tuple[Oracle, ...] = (Oracle(),),
     evaluations: tuple[Path, ...] = (),
+    predictions: bool = False,
 ) -> dict[str, Any]:
     """Run the chosen parts at each rate; returns (and the CLI writes) everything measured. `family`:
     the canyon family of the OU statistics (the oracle and the small net drive in `canyons`);
-    `oracles`: those the oracle and agreement parts use; `evaluations`: the agreement part's folders."""
+    `oracles`: those the oracle and agreement parts use; `evaluations`: the agreement part's folders
+    (`predictions`: with the checkpoint's own values re-predicted at every step)."""
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
         raise ConfigError(f"unknown probe part(s) {unknown}; expected some of {PARTS}")
@@ -120,7 +122,8 @@ def probe(
     if "agreement" in parts:
         if not evaluations:
             raise ConfigError("probe part 'agreement' needs evaluation folders (--evals)")
-        result["agreement"] = [measure_agreement(e, o, out) for e in evaluations for o in oracles]
+        result["agreement"] = [measure_agreement(e, o, out, predictions)
+                               for e in evaluations for o in oracles]
     if "dqn" in parts:
         result["dqn"] = {
             f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons, epochs) for hz in rates
@@ -128,9 +131,9 @@ def probe(
     return result
 
 
-def measure_agreement(folder: Path, oracle: Oracle, out: Path) -> dict[str, Any]:
+def measure_agreement(folder: Path, oracle: Oracle, out: Path, predictions: bool = False) -> dict[str, Any]:
     """`agreement` of one evaluation; its per-step arrays and figure go to OUT/agreement/<name>_<oracle>."""
-    summary, arrays = agreement(folder, oracle)
+    summary, arrays = agreement(folder, oracle, predictions)
     stem = out / "agreement" / f"{Path(folder).name}_{str(oracle).replace(':', '-')}"
     stem.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(stem.with_suffix(".npz"), **arrays)

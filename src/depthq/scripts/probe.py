@@ -27,6 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--evals", default="",
                    help="evaluation folders (depthq evaluate's --out) for the agreement part, "
                    "comma-separated")
+    p.add_argument("--predictions", action="store_true",
+                   help="agreement: also re-predict a checkpoint's values at every step (renders each frame)")
     p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
     p.add_argument("--runs", type=int, default=200, help="training runs of the small Depth-Q-Net")
     p.add_argument("--epochs", type=int, default=40, help="training epochs of the small Depth-Q-Net")
@@ -49,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     oracles = tuple(Oracle.parse(text) for text in args.oracle.split(","))
     evaluations = tuple(Path(text) for text in args.evals.split(",") if text)
     result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs,
-                   args.family, oracles, evaluations)
+                   args.family, oracles, evaluations, args.predictions)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "probe.json").write_text(json.dumps(result, indent=1))
     if "stats" in result:

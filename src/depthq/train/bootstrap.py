@@ -28,7 +28,7 @@ def greedy_bins(head: Head, features: torch.Tensor) -> torch.Tensor:
     nearest = torch.where(bins > 0, bins, torch.inf).amin(dim=2)
     nearest = torch.where(torch.isfinite(nearest), nearest, 0.0)  # all bins 0: no prediction, score 0
     best = nearest.amax(dim=1, keepdim=True)
-    tied = nearest >= best - TIE_TOL
+    tied = nearest >= best - TIE_TOL["depth"]
     pick = torch.where(tied[:, _STRAIGHT], _STRAIGHT, tied.float().argmax(dim=1))  # first tied otherwise
     return bins[torch.arange(len(features)), pick]
 
