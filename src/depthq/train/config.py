@@ -108,6 +108,10 @@ class TrainConfig:
     # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
     # greedy policy's future, discounted (a safety Bellman equation). 0: the paper's one-step target.
     bootstrap: float = field(default=0.0, metadata=OMIT_DEFAULT)
+    # Each training sample taken mirrored with probability 1/2 (docs/design.md#mirror): the frame
+    # flipped left to right (a second feature cache), the action negated, the depth bins reversed; a
+    # canyon's mirror image is a canyon, and a turn's effect on it is the mirrored turn's.
+    mirror: bool = field(default=False, metadata=OMIT_DEFAULT)
     # Labels (`depthq.data.labels`); the defaults are the original's.
     horizon: int = HORIZON
     min_frames: int = MIN_FRAMES
@@ -167,6 +171,11 @@ class TrainConfig:
         _int_at_least("hidden", self.hidden, 1)
         self.head()  # the head's own rules (form, lookahead, projection size)
         self._check_bootstrap()
+        if not isinstance(self.mirror, bool):
+            raise ConfigError(f"train.mirror must be true or false, got {self.mirror!r}")
+        if self.mirror and not TRUNKS[self.trunk].frozen:
+            raise ConfigError(f"train.mirror: mirrored samples come from a frozen trunk's feature cache, "
+                              f"but trunk {self.trunk!r} is trained with the head")
         if self.depth_loss not in DEPTH_LOSSES:
             raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
         if self.select not in SELECT:

@@ -51,9 +51,10 @@ FORMAT_VERSION = 1
 BATCH = 128  # frames per decode + trunk batch (the trunk splits it into cache-sized micro-batches)
 
 
-def cache_dir(root: Path, trunk: str, size: int) -> Path:
-    """Where the features of `trunk` at `size` px for the dataset in `root` live."""
-    return Path(root) / FEATURES / f"{trunk}_{size}"
+def cache_dir(root: Path, trunk: str, size: int, mirrored: bool = False) -> Path:
+    """Where the features of `trunk` at `size` px for the dataset in `root` live (`mirrored`: those of
+    every frame flipped left to right, for a training with mirrored samples)."""
+    return Path(root) / FEATURES / f"{trunk}_{size}{'_mirrored' if mirrored else ''}"
 
 
 def dataset_fingerprint(dataset: Dataset) -> str:
@@ -83,11 +84,13 @@ class FeatureTable:
 
 
 def load_features(
-    dataset: Dataset, trunk: str, size: int, progress: bool = True, device: torch.device | str = "cpu"
+    dataset: Dataset, trunk: str, size: int, progress: bool = True, device: torch.device | str = "cpu",
+    mirrored: bool = False,
 ) -> FeatureTable:
-    """The cached features of `dataset`, computed first (on `device`) if missing or stale."""
-    folder = cache_dir(dataset.root, trunk, size)
-    expected = _index(dataset, trunk, size)
+    """The cached features of `dataset` (`mirrored`: of its frames flipped left to right), computed
+    first (on `device`) if missing or stale."""
+    folder = cache_dir(dataset.root, trunk, size, mirrored)
+    expected = _index(dataset, trunk, size, mirrored)
     table = _read(folder, expected)
     if table is not None:
         return table
@@ -128,7 +131,7 @@ def compute_features(
         bar = tqdm(total=n_frames, desc=f"features {trunk.name} {size}px", unit="frame", disable=not progress)
         row = 0
         with torch.inference_mode():
-            for batch in prefetch(frame_batches(dataset, size), depth=2):
+            for batch in prefetch(frame_batches(dataset, size, index.get("mirrored", False)), depth=2):
                 out[row : row + len(batch)] = trunk(batch.to(device)).cpu().numpy()
                 row += len(batch)
                 bar.update(len(batch))
@@ -149,7 +152,7 @@ def compute_features(
     return n_frames / seconds
 
 
-def _index(dataset: Dataset, trunk: str, size: int) -> dict:
+def _index(dataset: Dataset, trunk: str, size: int, mirrored: bool = False) -> dict:
     """What index.json must say for the cache to be valid (minus the file's size)."""
     spec = trunk_spec(trunk)
     runs, row = {}, 0
@@ -165,6 +168,7 @@ def _index(dataset: Dataset, trunk: str, size: int) -> dict:
         "fingerprint": dataset_fingerprint(dataset),
         "runs": runs,
         "shape": [row, spec.feature_dim],
+        **({"mirrored": True} if mirrored else {}),
     }
 
 
@@ -189,17 +193,23 @@ def _read(folder: Path, expected: dict) -> FeatureTable | None:
     return FeatureTable(features, runs, computed=False)
 
 
-def frame_batches(dataset: Dataset, size: int) -> Iterator[torch.Tensor]:
-    """Every frame of every run in manifest order, decoded and resized, in batches of `BATCH`."""
+def frame_batches(dataset: Dataset, size: int, mirrored: bool = False) -> Iterator[torch.Tensor]:
+    """Every frame of every run in manifest order, decoded and resized (`mirrored`: then flipped left to
+    right), in batches of `BATCH`."""
     frames: list[np.ndarray] = []
     for entry in dataset.entries():
         for image in _run_frames(dataset, entry):
             frames.append(image)
             if len(frames) == BATCH:
-                yield preprocess(np.stack(frames), size)
+                yield _prepare(frames, size, mirrored)
                 frames = []
     if frames:
-        yield preprocess(np.stack(frames), size)
+        yield _prepare(frames, size, mirrored)
+
+
+def _prepare(frames: list[np.ndarray], size: int, mirrored: bool) -> torch.Tensor:
+    batch = preprocess(np.stack(frames), size)
+    return batch.flip(-1) if mirrored else batch
 
 
 def _run_frames(dataset: Dataset, entry: RunEntry) -> Iterator[np.ndarray]:

@@ -60,19 +60,37 @@ class Samples(ABC):
 
 class FeatureSamples(Samples):
     """Samples whose trunk features are cached: the head is all that runs. With `following`, each
-    batch carries its samples' next frames' features too (a one-step sample's next frame always exists)."""
+    batch carries its samples' next frames' features too (a one-step sample's next frame always exists).
+
+    With a `mirrored` table (the features of the frames flipped left to right), each drawn sample is
+    taken mirrored with probability 1/2 (docs/design.md#mirror): its mirrored features, its action
+    negated, its depth bins reversed (left is right); a collision label stays as it is.
+    """
 
     def __init__(
-        self, arrays: dict[str, np.ndarray], table: FeatureTable, split: str, following: bool = False
+        self, arrays: dict[str, np.ndarray], table: FeatureTable, split: str, following: bool = False,
+        mirrored: FeatureTable | None = None,
     ) -> None:
         super().__init__(arrays)
-        self.features = table.gather(split, arrays)
         following_rows = {**arrays, "frame_id": arrays["frame_id"] + 1}
-        self.following = table.gather(split, following_rows) if following else None
+        tables = (table,) if mirrored is None else (table, mirrored)
+        self.features = torch.stack([t.gather(split, arrays) for t in tables])  # (1 or 2, S, D)
+        self.following = (torch.stack([t.gather(split, following_rows) for t in tables]) if following
+                          else None)
+        self.targets = torch.stack([self.targets, self.targets.flip(-1) if self.targets.ndim > 1
+                                    else self.targets])[: len(tables)]
+        self.actions = torch.stack([self.actions, -self.actions])[: len(tables)]
+
+    def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
+        """(n, 2) rows: the sample and whether it is taken mirrored (never without a mirrored table)."""
+        idx = super().draw(n, rng)
+        mirror = rng.random(n) < 0.5 if len(self.features) == 2 else np.zeros(n, dtype=bool)
+        return torch.stack([idx, torch.from_numpy(mirror.astype(np.int64))], dim=1)
 
     def batch(self, idx: torch.Tensor) -> Batch:
-        following = None if self.following is None else self.following[idx].float()
-        return Batch(self.features[idx].float(), self.actions[idx], self.targets[idx], following)
+        i, m = idx[:, 0], idx[:, 1]
+        following = None if self.following is None else self.following[m, i].float()
+        return Batch(self.features[m, i].float(), self.actions[m, i], self.targets[m, i], following)
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)

@@ -77,7 +77,7 @@ def train(
     if config.feature_projection and not state.epoch:  # a resumed training's is in its checkpoint
         # On the training samples' cached features (a frozen trunk's: TrainConfig allows no other),
         # never the validation split's.
-        model.head.fit_projection(train_set.features.numpy())
+        model.head.fit_projection(train_set.features[0].numpy())
 
     target_head = None  # a bootstrapped target's network Q̄: the previous epoch's head, from epoch 2 on
     tb = SummaryWriter(out / "tb", purge_step=state.epoch + 1)
@@ -177,8 +177,10 @@ def _samples(
                   for split, n in (("train", config.runs), ("val", None))}
         _check_labels(config, arrays["train"]["target"])
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
-        following = config.bootstrap > 0
-        return (FeatureSamples(arrays["train"], table, "train", following),
+        mirrored = (load_features(dataset, config.trunk, config.input_size, progress, device, mirrored=True)
+                    if config.mirror else None)
+        following = config.bootstrap > 0  # validation is never mirrored: the frames as recorded
+        return (FeatureSamples(arrays["train"], table, "train", following, mirrored),
                 FeatureSamples(arrays["val"], table, "val", following))
     view = DepthView if config.model == "depth" else CollView
     train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead)
