@@ -15,6 +15,8 @@ from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, OracleWorld, agreement, drive_oracle, env_config
 from depthq.sim.env import SPAWN
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
 
 
 def test_oracles_parse_by_name_and_refuse_bad_ones() -> None:
@@ -90,3 +92,22 @@ def test_probe_writes_agreement_and_refuses_bad_input(ou_evaluation: Path, tmp_p
     assert (out / "probe.json").is_file() and (out / "agreement" / "ou_coll-2.png").stat().st_size > 1000
     assert main(["probe", "--parts", "agreement", "--out", str(tmp_path / "x")]) == 2
     assert main(["probe", "--parts", "oracle", "--oracle", "bump:1", "--out", str(tmp_path / "y")]) == 2
+
+
+@pytest.mark.slow
+def test_a_checkpoints_values_are_re_predicted_along_its_runs(
+    small_dataset: Path, ou_evaluation: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(ConfigError, match="checkpoint"):
+        agreement(ou_evaluation, Oracle(), predictions=True)
+    fast = {"epochs": 1, "train_batches": 2, "val_batches": 1, "batch_size": 16, "hidden": 32}
+    folder = train(TrainConfig(model="depth", data=str(small_dataset), **fast), tmp_path / "dqn",
+                   progress=False)
+    config = EvalConfig(canyons=parse_canyon_set("hard/val:1000"), time_limit_s=3.0)
+    evaluate(str(folder), tmp_path / "eval", config, workers=1, progress=False, video=False)
+    summary, arrays = agreement(tmp_path / "eval", Oracle(), predictions=True)
+    steps = summary["steps"]
+    assert arrays["predicted"].shape == (steps, 3, 26) and arrays["predicted_scores"].shape == (steps, 3)
+    assert arrays["true_bins"].shape == (steps, 3, 1, 26)
+    assert 0 <= summary["same_decision_new_noise"] <= 1 and summary["score_error"] > 0
+    assert summary["true_spread"] >= 0 and summary["predicted_spread"] >= 0

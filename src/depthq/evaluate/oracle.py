@@ -266,7 +266,7 @@ def agreement(
     def share(mask: np.ndarray) -> float | None:
         return float(agrees[mask].mean()) if mask.any() else None
 
-    return {
+    return {**_prediction_summary(arrays, oracle, late), **{
         "evaluation": str(folder),
         "policy": summary["policy"].get("policy"),
         "oracle": str(oracle),
@@ -282,4 +282,24 @@ def agreement(
         "collisions_with_pillar": hits.count("pillar"),
         "progress_mean": summary["summary"]["progress_mean"],
         "distance_to_collision_mean": summary["summary"]["distance_to_collision_mean"],
-    }, arrays
+    }}, arrays
+
+
+def _prediction_summary(arrays: dict[str, np.ndarray], oracle: Oracle, late: np.ndarray) -> dict[str, Any]:
+    """What the re-predicted values say, where they exist and are the oracle's kind of score (a depth
+    policy against a depth oracle of its lookahead): how far each candidate's predicted score is from
+    the true one, how far apart the candidates are in truth and in prediction (the action's effect),
+    and how often a fresh draw of pixel noise changes the policy's decision."""
+    if "predicted_scores" not in arrays:
+        return {}
+    predicted, recorded = arrays["predicted_scores"], arrays["policy"]
+    choice = np.array(ACTIONS)[predicted.argmax(1) if oracle.signal == "depth" else predicted.argmin(1)]
+    out: dict[str, Any] = {"same_decision_new_noise": float((choice == recorded).mean())}
+    if oracle.signal == "depth" and predicted.shape == arrays["scores"].shape:
+        error, truth = np.abs(predicted - arrays["scores"]), arrays["scores"]
+        for name, mask in (("", np.ones_like(late)), ("_before_collision", late)):
+            if mask.any():
+                out[f"score_error{name}"] = float(error[mask].mean())
+                out[f"true_spread{name}"] = float(np.ptp(truth[mask], axis=1).mean())
+                out[f"predicted_spread{name}"] = float(np.ptp(predicted[mask], axis=1).mean())
+    return out
