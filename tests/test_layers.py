@@ -30,6 +30,7 @@ LAYERS: list[dict[str, tuple[str, ...]]] = [
     {"report": ("depthq.report",), "bench": ("depthq.bench",)},
     {"scripts": ("depthq.scripts",)},
     {"cli": ("depthq.cli",)},
+    {"experiments": ("depthq.experiments",)},  # measurements behind the docs, driving the verbs
 ]
 # The package root runs before any module (it sets MUJOCO_GL) and may import only `depthq.sim`'s
 # `__init__`, which registers the env by name; any module may import the root (for `__version__`).

@@ -15,6 +15,7 @@ Layers, each importing only from those before it (tests/test_layers.py checks th
     ← evaluate | deploy                     online evaluation | ONNX export and the robot step
     ← report | bench                        the reproduction pipeline | `depthq bench` figures
     ← scripts ← cli                         one module per verb, the `depthq` command
+    ← experiments                           the measurements behind the docs, run as modules
 
 Units on one line (`|`) do not import each other. This root module runs first and imports only
 `depthq.sim`'s `__init__` (the env's name); any module may import it for `__version__`.

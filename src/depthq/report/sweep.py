@@ -28,7 +28,7 @@ NOT_IN_GRID = ("model", "data", "runs", "seed")
 # Settings only Depth-Q-Net has (`TrainConfig.lookahead`): a Coll-Q-Net in a variant that sets them
 # is the variant without them, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
 # variant's row shows it).
-DEPTH_ONLY = ("lookahead", "lookahead_discount")
+DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap")
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 

@@ -1,0 +1,181 @@
+"""The oracle gap (docs/oracle_gap.md): Depth-Q-Net candidates, one factor at a time, against
+Coll-Q-Net, in the hard family's `val` canyons; and each model's agreement with the one-step oracle
+along its own runs.
+
+    python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500]
+    python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500]
+
+`run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
+measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
+measured once); `table` prints the Markdown table of what has finished. The `eval` canyons are never
+driven here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from depthq.cli import main as depthq
+from depthq.configio import read_json, write_json
+from depthq.evaluate.oracle import Oracle
+from depthq.report.presets import get_preset
+from depthq.report.probe import measure_agreement
+from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget
+from depthq.report.tables import interval
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A row: a network and the training settings (`depthq sweep --set`) it changes from the defaults."""
+
+    name: str
+    sets: tuple[str, ...] = ()
+    net: str = "depth"
+
+
+CANDIDATES = (
+    Candidate("Coll-Q-Net, for scale", net="coll"),
+    Candidate("Depth-Q-Net, today's default"),
+    Candidate("keep the samples before each run's end (horizon 1)", ("horizon=1",)),
+    Candidate("head width 1024", ("hidden=1024",)),
+    Candidate("per-action head (scene and action apart)", ("head_form=per_action",)),
+    Candidate("4 × 4 grid feature, head width 1024", ("trunk=efficientnet_lite0_grid", "hidden=1024")),
+    Candidate("relative depth loss", ("depth_loss=relative",)),
+    Candidate("bootstrapped value, γ = 0.5", ("bootstrap=0.5",)),
+    Candidate("bootstrapped value, γ = 0.9", ("bootstrap=0.9",)),
+    Candidate("bootstrapped value, γ = 0.95", ("bootstrap=0.95",)),
+    Candidate("bootstrapped value, γ = 0.98", ("bootstrap=0.98",)),
+    Candidate("bootstrapped value γ = 0.9, relative loss", ("bootstrap=0.9", "depth_loss=relative")),
+    Candidate("mirrored samples", ("mirror=true",)),
+    Candidate("mirrored samples, bootstrapped value γ = 0.9", ("mirror=true", "bootstrap=0.9")),
+    Candidate("Coll-Q-Net, mirrored samples", ("mirror=true",), net="coll"),
+)
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Where the candidates run: a preset's dataset, its `val` canyons, the sizes and seeds."""
+
+    preset: str = "hard"
+    canyons: str | None = "hard/val:1000-1019"  # None: the preset's own
+    runs: int = 500
+    sizes: tuple[int, ...] = (500,)
+    seeds: tuple[int, ...] = (0,)
+
+
+def sweep_args(setup: Setup, candidate: Candidate, seed: int, out: Path) -> list[str]:
+    args = ["sweep", "--preset", setup.preset, "--runs", str(setup.runs),
+            "--sizes", ",".join(map(str, setup.sizes)), "--seeds", str(seed), "--nets", candidate.net,
+            "--out", str(out)]
+    if setup.canyons:
+        args += ["--canyons", setup.canyons]
+    for setting in candidate.sets:
+        args += ["--set", setting]
+    return args
+
+
+def model_names(setup: Setup, candidate: Candidate, size: int) -> list[str]:
+    """The model folders a candidate's sweeps train at `size`, one per seed."""
+    sweep = replace(
+        retarget(get_preset(setup.preset), None, setup.canyons),
+        runs=setup.runs,
+        subsets=(size,),
+        seeds=setup.seeds,
+        nets=(candidate.net,),
+        grid=tuple(parse_setting(s) for s in candidate.sets),
+    )
+    return [m.name for m in Sweep.models(sweep)]
+
+
+def run(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES) -> int:
+    """Every candidate's sweeps (seed-major, so a partial run has whole columns), then agreement."""
+    for seed in setup.seeds:
+        for candidate in candidates:
+            args = sweep_args(setup, candidate, seed, out)
+            print("depthq " + " ".join(args), flush=True)
+            if (status := depthq(args)) != 0:
+                return status
+    measure(out, setup, candidates)
+    print(table(out, setup, candidates))
+    return 0
+
+
+def measure(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES) -> dict[str, Any]:
+    """The one-step oracle's agreement with every finished evaluation, with re-predicted values:
+    OUT/agreement.json, each evaluation measured once."""
+    path = out / "agreement.json"
+    done: dict[str, Any] = read_json(path) if path.is_file() else {}
+    for candidate in candidates:
+        for size in setup.sizes:
+            for name in model_names(setup, candidate, size):
+                folder = out / "eval" / name
+                if name not in done and (folder / "summary.json").is_file():
+                    done[name] = measure_agreement(folder, Oracle(), out / "probe", predictions=True)
+                    write_json(path, done)
+    return done
+
+
+def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES) -> str:
+    """Markdown: per candidate and size, distance to the first collision (mean over seeds, 95 %
+    interval with 2 or more), ends reached, agreement with the one-step oracle on decisive steps and
+    in the last 2 s before a collision, pillar collisions, decisions a new pixel noise keeps."""
+    agreement = read_json(out / "agreement.json") if (out / "agreement.json").is_file() else {}
+    lines = [
+        "| candidate | runs | seeds | to first collision (m) | ends reached /20 | agrees, decisive | "
+        "agrees, last 2 s | pillar collisions | same decision, new noise |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for candidate in candidates:
+        for size in setup.sizes:
+            rows = []
+            for name in model_names(setup, candidate, size):
+                summary = out / "eval" / name / "summary.json"
+                if summary.is_file():
+                    rows.append((json.loads(summary.read_text())["summary"], agreement.get(name)))
+            if not rows:
+                continue
+            d2c = [s["distance_to_collision_mean"] for s, _ in rows]
+            bounds = interval(d2c)
+            spread = f" [{bounds[0]:.2f}, {bounds[1]:.2f}]" if bounds else ""
+            agreed = [a for _, a in rows if a]
+
+            def mean(key: str, fmt: str, agreed: list = agreed) -> str:
+                values = [a[key] for a in agreed if a.get(key) is not None]
+                return format(sum(values) / len(values), fmt) if values else "–"
+
+            pillars = (
+                f"{sum(a['collisions_with_pillar'] for a in agreed)}/{sum(a['collisions'] for a in agreed)}"
+                if agreed
+                else "–"
+            )
+            ends = sum(s["reached_end"] for s, _ in rows) / len(rows)
+            cells = [candidate.name, size, len(rows), f"{sum(d2c) / len(d2c):.2f}{spread}", f"{ends:.1f}",
+                     mean("agreement_decisive", ".0%"), mean("agreement_before_collision", ".0%"), pillars,
+                     mean("same_decision_new_noise", ".0%")]
+            lines.append("| " + " | ".join(map(str, cells)) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
+    )
+    parser.add_argument("action", choices=("run", "table"))
+    parser.add_argument("out", type=Path, help="the sweep folder the candidates share")
+    parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
+    parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
+    args = parser.parse_args(argv)
+    setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
+    if args.action == "run":
+        return run(args.out, setup)
+    print(table(args.out, setup))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

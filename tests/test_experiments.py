@@ -1,0 +1,35 @@
+"""The experiments of `depthq.experiments` at toy size, on a copy of the suite's smoke run (a real
+collection, trainings and evaluations): each runs, resumes and tabulates what it measured."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from depthq.experiments import oracle_gap
+
+
+@pytest.mark.slow
+def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
+    smoke: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "gap"
+    shutil.copytree(smoke, out)
+    setup = oracle_gap.Setup(preset="smoke", canyons=None, runs=6, sizes=(6,), seeds=(0,))
+    candidates = (oracle_gap.Candidate("default"), oracle_gap.Candidate("bootstrap", ("bootstrap=0.5",)))
+    assert oracle_gap.run(out, setup, candidates) == 0
+    names = [oracle_gap.model_names(setup, c, 6)[0] for c in candidates]
+    assert names == ["depth_n6_s0", "depth_n6_s0_bootstrap0.5"]
+    measured = json.loads((out / "agreement.json").read_text())
+    assert set(measured) == set(names) and all(0 <= m["agreement"] <= 1 for m in measured.values())
+    assert json.loads((out / "models" / names[1] / "config.json").read_text())["train"]["bootstrap"] == 0.5
+    rows = oracle_gap.table(out, setup, candidates).splitlines()
+    assert len(rows) == 4 and rows[3].startswith("| bootstrap | 6 | 1 | ")
+    summary = json.loads((out / "eval" / names[1] / "summary.json").read_text())["summary"]
+    assert f"{summary['distance_to_collision_mean']:.2f}" in rows[3]
+    stamp = (out / "agreement.json").stat().st_mtime_ns
+    assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
+    assert (out / "agreement.json").stat().st_mtime_ns == stamp
