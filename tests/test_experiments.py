@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from depthq.experiments import oracle_gap
+from depthq.errors import ConfigError
+from depthq.experiments import oracle_gap, privileged
 
 
 @pytest.mark.slow
@@ -33,3 +34,20 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     stamp = (out / "agreement.json").stat().st_mtime_ns
     assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
     assert (out / "agreement.json").stat().st_mtime_ns == stamp
+
+
+@pytest.mark.slow
+def test_privileged_input_trains_on_the_lidar_and_drives_without_a_camera(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    results = privileged.run(small_dataset, tmp_path, ("bins", "scan"), ("depth",), "val:1000", runs=None,
+                             epochs=1)
+    assert set(results) == {"depth_bins_nNone_s0", "depth_scan_nNone_s0"}
+    for r in results.values():
+        assert r["per_canyon"][0]["canyon"] == "val:1000" and r["progress_mean"] > 0
+    stamp = (tmp_path / "results.json").stat().st_mtime_ns
+    assert privileged.run(small_dataset, tmp_path, ("bins",), ("depth",), "val:1000", runs=None) == results
+    assert (tmp_path / "results.json").stat().st_mtime_ns == stamp  # resumed: nothing trained again
+    assert "| Depth-Q-Net | the current 26 bins (LiDAR) | None | 0 |" in privileged.table([tmp_path])
+    with pytest.raises(ConfigError, match="privileged input"):
+        privileged.run(small_dataset, tmp_path, ("image",), ("depth",), "val:1000", runs=None)
