@@ -56,7 +56,8 @@ def view_arrays(
     Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
     `frame_id` (t), `action` (a_t: the stored command of frame t − action_lag, clipped to
-    ±action_clip), and `target`: bins[t + 1] (S, 26) for "depth", y_t (S,) for "coll".
+    ±action_clip), `current`: bins[t] (S, 26), and `target`: bins[t + 1] (S, 26) for "depth", y_t
+    (S,) for "coll".
 
     "depth" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
     clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
@@ -73,7 +74,7 @@ def view_arrays(
     runs = select_runs(dataset, split, n_runs, config.min_frames)
     if not runs:
         raise ConfigError(f"{dataset.root} has no usable {split} runs (at least {config.min_frames} frames)")
-    frame_ids, actions, targets, masks = [], [], [], []
+    frame_ids, actions, targets, masks, current = [], [], [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
         ended = labelled_collision(entry, config.every_run_end)
@@ -92,6 +93,7 @@ def view_arrays(
             target = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
             commands = run.actions[t - config.action_lag]
         frame_ids.append(t)
+        current.append(run.bins[t])
         actions.append(np.clip(commands, -config.action_clip, config.action_clip))
         targets.append(target)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
@@ -103,6 +105,7 @@ def view_arrays(
         "frame_id": np.concatenate(frame_ids),
         "action": np.concatenate(actions),
         "target": np.concatenate(targets),
+        "current": np.concatenate(current),
         **({"mask": np.concatenate(masks)} if masks else {}),
     }
 

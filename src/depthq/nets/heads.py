@@ -37,8 +37,9 @@ from depthq.nets.trunk import Trunk
 
 HeadKind = Literal["depth", "coll"]
 HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
-# "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action.
-HEAD_FORMS: tuple[str, ...] = ("concat", "per_action")
+# "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
+# "depth_first": the current bins from the feature, then the next bins from them and the action.
+HEAD_FORMS: tuple[str, ...] = ("concat", "per_action", "depth_first")
 ANCHORS = (-1.0, 0.0, 1.0)  # the actions a "per_action" head predicts; a command in between blends two
 COLL_HIDDEN = 25
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
@@ -81,9 +82,9 @@ class HeadConfig:
             )
         if self.form not in HEAD_FORMS:
             raise ConfigError(f"HeadConfig.form must be one of {HEAD_FORMS}, got {self.form!r}")
-        if self.form == "per_action" and (self.kind != "depth" or self.lookahead != 1):
+        if self.form != "concat" and (self.kind != "depth" or self.lookahead != 1):
             raise ConfigError(
-                f"HeadConfig.form 'per_action' is a one-step Depth-Q-Net's (kind depth, lookahead 1), "
+                f"HeadConfig.form {self.form!r} is a one-step Depth-Q-Net's (kind depth, lookahead 1), "
                 f"got kind {self.kind!r}, lookahead {self.lookahead!r}"
             )
         p = self.feature_projection
@@ -166,7 +167,7 @@ class Head(nn.Module):
             raise ConfigError(f"head: {feature.shape[0]} features but {action.shape[0]} actions")
         if self.projection is not None:
             feature = self.projection(feature)
-        if self.config.form == "per_action":
+        if self.config.form != "concat":  # the action enters after the hidden layer
             return F.relu(self.hidden(self.dropout(feature)))
         return F.relu(self.hidden(torch.cat([self.dropout(feature), action], dim=1)))
 
@@ -197,6 +198,35 @@ class DepthHead(Head):
         return bins if k == 1 else bins.reshape(-1, k, self.config.n_bins)
 
 
+class DepthFirstHead(Head):
+    """Depth-Q-Net head of form "depth_first" (docs/design.md#depth-first): perception, the current
+    frame's bins from the feature (hidden layer → FC n_bins), then dynamics, the next frame's bins
+    from those and the action (FC hidden + ReLU → FC n_bins + ReLU), as a net given the LiDAR would.
+    Training fits each part to its own LiDAR target (`perceive` to bins[t], `advance` to bins[t+1]
+    from the true bins[t]); acting chains them."""
+
+    def __init__(self, config: HeadConfig) -> None:
+        n = config.n_bins
+        parts = nn.ModuleDict({
+            "current": nn.Linear(config.hidden, n),
+            "dynamics": nn.Sequential(nn.Linear(n + 1, config.hidden), nn.ReLU(),
+                                      nn.Linear(config.hidden, n)),
+        })
+        super().__init__(config, parts)
+
+    def perceive(self, feature: torch.Tensor) -> torch.Tensor:
+        """(B, D) → (B, n_bins): the current frame's bins as the feature shows them (unbounded)."""
+        return self.output["current"](self.hidden_features(feature, torch.zeros(len(feature))))
+
+    def advance(self, bins: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Current bins (B, n_bins) and actions (B,) → the next frame's bins (B, n_bins), ≥ 0."""
+        action = action.reshape(-1, 1).to(bins.dtype) * self.config.action_scale
+        return F.relu(self.output["dynamics"](torch.cat([bins, action], dim=1)))
+
+    def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        return self.advance(self.perceive(feature).clamp(min=0.0), action)
+
+
 def anchor_weights(action: torch.Tensor) -> torch.Tensor:
     """(B,) commands → (B, 3) weights of the ANCHORS: linear interpolation, clipped to [−1, 1]."""
     anchors = torch.tensor(ANCHORS, dtype=action.dtype, device=action.device)
@@ -222,7 +252,9 @@ def probability(logits: torch.Tensor) -> torch.Tensor:
 
 def build_head(config: HeadConfig) -> Head:
     """The head `config.kind` names."""
-    return DepthHead(config) if config.kind == "depth" else CollHead(config)
+    if config.kind == "coll":
+        return CollHead(config)
+    return DepthFirstHead(config) if config.form == "depth_first" else DepthHead(config)
 
 
 class QNet(nn.Module):

@@ -19,6 +19,7 @@ from tqdm import tqdm
 
 from depthq.data.views import FrameView, run_then_frame
 from depthq.nets.heads import QNet
+from depthq.nets.losses import DEPTH_CLIP
 from depthq.nets.trunk import resize_frames, scale_frames
 from depthq.train.features import FeatureTable
 
@@ -27,17 +28,22 @@ from depthq.train.features import FeatureTable
 class Batch:
     """Model inputs (features (B, D) or images (B, 3, S, S)), actions (B,), targets (B, bins) or (B,);
     a lookahead Depth-Q-Net's: actions (B, K), targets (B, K, bins) (NaN on masked steps).
-    `next_inputs`: the next frame's features (B, D), for a bootstrapped target; else None."""
+    `next_inputs`: the next frame's features (B, D), for a bootstrapped target; `current`: the
+    frame's own bins (B, bins; invalid as the clip), for a "depth_first" head; else None."""
 
     inputs: torch.Tensor
     actions: torch.Tensor
     targets: torch.Tensor
     next_inputs: torch.Tensor | None = None
+    current: torch.Tensor | None = None
 
     def to(self, device: torch.device) -> Batch:
         """The batch on `device` (a no-op on the CPU, where samples live)."""
-        following = None if self.next_inputs is None else self.next_inputs.to(device)
-        return Batch(self.inputs.to(device), self.actions.to(device), self.targets.to(device), following)
+        def move(t: torch.Tensor | None) -> torch.Tensor | None:
+            return None if t is None else t.to(device)
+
+        return Batch(self.inputs.to(device), self.actions.to(device), self.targets.to(device),
+                     move(self.next_inputs), move(self.current))
 
 
 class Samples(ABC):
@@ -47,6 +53,7 @@ class Samples(ABC):
         self.run_offsets = arrays["run_offsets"]
         self.actions = torch.from_numpy(arrays["action"]).float()
         self.targets = torch.from_numpy(arrays["target"]).float()
+        self.current = torch.from_numpy(np.nan_to_num(arrays["current"], nan=DEPTH_CLIP)).float()
 
     def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
         return torch.from_numpy(run_then_frame(self.run_offsets, n, rng))
@@ -79,6 +86,7 @@ class FeatureSamples(Samples):
                           else None)
         self.targets = torch.stack([self.targets, self.targets.flip(-1) if self.targets.ndim > 1
                                     else self.targets])[: len(tables)]
+        self.current = torch.stack([self.current, self.current.flip(-1)])[: len(tables)]
         self.actions = torch.stack([self.actions, -self.actions])[: len(tables)]
 
     def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
@@ -90,7 +98,8 @@ class FeatureSamples(Samples):
     def batch(self, idx: torch.Tensor) -> Batch:
         i, m = idx[:, 0], idx[:, 1]
         following = None if self.following is None else self.following[m, i].float()
-        return Batch(self.features[m, i].float(), self.actions[m, i], self.targets[m, i], following)
+        return Batch(self.features[m, i].float(), self.actions[m, i], self.targets[m, i], following,
+                     self.current[m, i])
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)
@@ -114,7 +123,8 @@ class ImageSamples(Samples):
             self.frames[start:stop] = resize_frames(np.stack([view[i][0] for i in range(start, stop)]), size)
 
     def batch(self, idx: torch.Tensor) -> Batch:
-        return Batch(scale_frames(self.frames[idx]), self.actions[idx], self.targets[idx])
+        return Batch(scale_frames(self.frames[idx]), self.actions[idx], self.targets[idx],
+                     current=self.current[idx])
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model(batch.inputs, batch.actions)

@@ -23,7 +23,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.views import CollView, DepthView, view_arrays
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import Head, QNet
+from depthq.nets.heads import DepthFirstHead, Head, QNet
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss, lookahead_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
@@ -157,8 +157,17 @@ def train_step(
     precision: str = "fp32",
 ) -> float:
     """One Adadelta step on `batch` (`predict`'s `precision`); returns its loss. A non-finite loss is
-    returned without a step."""
-    loss, _ = loss_fn(predict(model, samples, batch, precision), batch.targets)
+    returned without a step. A "depth_first" head fits each part to its own target
+    (docs/design.md#depth-first): its dynamics to the next bins from the true current ones, its
+    perception to the current bins (L1 over all of them, invalid as the clip)."""
+    if isinstance(model.head, DepthFirstHead):
+        head, bf16 = model.head, precision == "bf16"
+        with torch.autocast(device_type=batch.inputs.device.type, dtype=torch.bfloat16, enabled=bf16):
+            features = batch.inputs if batch.inputs.ndim == 2 else model.trunk(batch.inputs)
+            advanced, perceived = head.advance(batch.current, batch.actions), head.perceive(features)
+        loss = loss_fn(advanced.float(), batch.targets)[0] + (perceived.float() - batch.current).abs().mean()
+    else:
+        loss, _ = loss_fn(predict(model, samples, batch, precision), batch.targets)
     value = loss.item()
     if math.isfinite(value):
         optimizer.zero_grad(set_to_none=True)
