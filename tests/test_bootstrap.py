@@ -74,3 +74,20 @@ def test_a_bootstrapped_training_starts_as_the_plain_one_and_then_departs(
     assert boot_losses[0] == plain_losses[0]  # epoch 1: no target network yet, the one-step targets
     assert np.isfinite(boot_losses).all()
     assert boot_losses[1] != plain_losses[1]  # from epoch 2 on the previous epoch's head bootstraps
+
+
+@pytest.mark.slow
+def test_a_depth_first_training_fits_both_parts_and_drives(small_dataset: Path, tmp_path: Path) -> None:
+    config = TrainConfig(model="depth", data=str(small_dataset), epochs=4, train_batches=6, val_batches=2,
+                         batch_size=16, hidden=64, head_form="depth_first")
+    folder = train(config, tmp_path / "df", progress=False)
+    recorded = json.loads((folder / "config.json").read_text())
+    assert recorded["head"]["form"] == "depth_first" and recorded["train"]["head_form"] == "depth_first"
+    rows = [line.split(",") for line in (folder / "metrics.csv").read_text().splitlines()[1:]]
+    train_losses = [float(r[1]) for r in rows]
+    assert train_losses[-1] < train_losses[0]  # perception and dynamics both learn
+    from depthq.control.qnet_policy import QNetPolicy
+
+    policy = QNetPolicy.from_checkpoint(folder)
+    frame = np.zeros((308, 410, 3), np.uint8)
+    assert policy.act({"image": frame}) in (-1.0, 0.0, 1.0) and policy.last_values.shape == (3, 26)

@@ -295,3 +295,18 @@ def test_the_grid_feature_keeps_rows_and_columns_of_the_block_map():
         # the columns' feature is the grid averaged over its rows
         torch.testing.assert_close(grid.mean(dim=1).flatten(), columns(frame)[0], rtol=1e-5, atol=1e-5)
         assert (grid[:, 0] - grid[:, 3]).abs().mean() > 0.1  # top and bottom rows differ
+
+
+def test_a_depth_first_head_perceives_the_current_bins_then_advances_them():
+    torch.manual_seed(0)
+    head = build_head(HeadConfig("depth", 32, hidden=16, form="depth_first")).eval()
+    assert head.hidden.in_features == 32 and head.output["dynamics"][0].in_features == 26 + 1
+    feature, action = torch.randn(4, 32), torch.tensor([-1.0, 0.0, 1.0, 0.5])
+    with torch.no_grad():
+        current = head.perceive(feature)
+        assert current.shape == (4, 26)
+        torch.testing.assert_close(head(feature, action), head.advance(current.clamp(min=0.0), action))
+        moved = head.advance(torch.ones(2, 26), torch.tensor([-1.0, 1.0]))
+        assert (moved >= 0).all() and not torch.equal(moved[0], moved[1])  # the action matters
+    with pytest.raises(ConfigError, match="depth_first"):
+        HeadConfig("coll", 32, form="depth_first")
