@@ -53,7 +53,10 @@ class Samples(ABC):
         self.run_offsets = arrays["run_offsets"]
         self.actions = torch.from_numpy(arrays["action"]).float()
         self.targets = torch.from_numpy(arrays["target"]).float()
-        self.current = torch.from_numpy(np.nan_to_num(arrays["current"], nan=DEPTH_CLIP)).float()
+        # a "depth_first" head's perception target: the frame's own bins, an invalid one as the clip
+        current = arrays.get("current")
+        self.current = (None if current is None
+                        else torch.from_numpy(np.nan_to_num(current, nan=DEPTH_CLIP)).float())
 
     def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
         return torch.from_numpy(run_then_frame(self.run_offsets, n, rng))
@@ -86,7 +89,8 @@ class FeatureSamples(Samples):
                           else None)
         self.targets = torch.stack([self.targets, self.targets.flip(-1) if self.targets.ndim > 1
                                     else self.targets])[: len(tables)]
-        self.current = torch.stack([self.current, self.current.flip(-1)])[: len(tables)]
+        if self.current is not None:
+            self.current = torch.stack([self.current, self.current.flip(-1)])[: len(tables)]
         self.actions = torch.stack([self.actions, -self.actions])[: len(tables)]
 
     def draw(self, n: int, rng: np.random.Generator) -> torch.Tensor:
@@ -98,8 +102,8 @@ class FeatureSamples(Samples):
     def batch(self, idx: torch.Tensor) -> Batch:
         i, m = idx[:, 0], idx[:, 1]
         following = None if self.following is None else self.following[m, i].float()
-        return Batch(self.features[m, i].float(), self.actions[m, i], self.targets[m, i], following,
-                     self.current[m, i])
+        current = None if self.current is None else self.current[m, i]
+        return Batch(self.features[m, i].float(), self.actions[m, i], self.targets[m, i], following, current)
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)
@@ -123,8 +127,8 @@ class ImageSamples(Samples):
             self.frames[start:stop] = resize_frames(np.stack([view[i][0] for i in range(start, stop)]), size)
 
     def batch(self, idx: torch.Tensor) -> Batch:
-        return Batch(scale_frames(self.frames[idx]), self.actions[idx], self.targets[idx],
-                     current=self.current[idx])
+        current = None if self.current is None else self.current[idx]
+        return Batch(scale_frames(self.frames[idx]), self.actions[idx], self.targets[idx], current=current)
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model(batch.inputs, batch.actions)
