@@ -54,6 +54,7 @@ CANDIDATES = (
     Candidate("mirrored samples", ("mirror=true",)),
     Candidate("mirrored samples, bootstrapped value γ = 0.9", ("mirror=true", "bootstrap=0.9")),
     Candidate("Coll-Q-Net, mirrored samples", ("mirror=true",), net="coll"),
+    Candidate("depth-first head (perception, then dynamics)", ("head_form=depth_first",)),
 )
 
 
