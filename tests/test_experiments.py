@@ -31,6 +31,8 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert len(rows) == 4 and rows[3].startswith("| bootstrap | 6 | 1 | ")
     summary = json.loads((out / "eval" / names[1] / "summary.json").read_text())["summary"]
     assert f"{summary['distance_to_collision_mean']:.2f}" in rows[3]
+    assert f"| b | `{names[1]}` | {summary['distance_to_collision_mean']:.2f} |" in oracle_gap.compare(
+        [("b", out / "eval" / names[1])])
     stamp = (out / "agreement.json").stat().st_mtime_ns
     assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
     assert (out / "agreement.json").stat().st_mtime_ns == stamp

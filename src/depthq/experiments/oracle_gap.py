@@ -162,15 +162,31 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
     return "\n".join(lines)
 
 
+def compare(named: list[tuple[str, Path]]) -> str:
+    """Markdown: one row per (name, evaluation folder), e.g. a checkpoint driven with `--which last`."""
+    lines = ["| policy | evaluation | to first collision (m) | ends reached /20 | collisions |",
+             "|---|---|---|---|---|"]
+    for name, folder in named:
+        s = json.loads((Path(folder) / "summary.json").read_text())["summary"]
+        lines.append(f"| {name} | `{Path(folder).name}` | {s['distance_to_collision_mean']:.2f} | "
+                     f"{s['reached_end']} | {s['collisions']} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("action", choices=("run", "table"))
-    parser.add_argument("out", type=Path, help="the sweep folder the candidates share")
+    parser.add_argument("action", choices=("run", "table", "compare"))
+    parser.add_argument("out", help="the sweep folder the candidates share; compare: NAME=EVAL,NAME=EVAL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     args = parser.parse_args(argv)
+    if args.action == "compare":
+        pairs = [item.partition("=") for item in args.out.split(",")]
+        print(compare([(name, Path(folder)) for name, _, folder in pairs]))
+        return 0
+    args.out = Path(args.out)
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
     if args.action == "run":
         return run(args.out, setup)
