@@ -1,5 +1,6 @@
-"""ROS 2 bags, both ways, on real files: a simulated dataset out to MCAP and SQLite3 and back in,
-a recording cut into runs, and each way a bag can be bad."""
+"""ROS bags, both ways, on real files: a simulated dataset out to MCAP, SQLite3 and ROS 1 and back in,
+a recording cut into runs, a camera-only recording, scans of other LiDARs resampled to depthq's
+360 readings, and each way a bag can be bad."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 
 rosbag = pytest.importorskip("depthq.data.rosbag")
-from rosbags.rosbag2 import Reader, Writer  # noqa: E402  (after the skip: rosbags is an extra)
+from rosbags import rosbag1, rosbag2  # noqa: E402  (after the skip: rosbags is an extra)
 
 MS = 1_000_000  # ns
 
@@ -28,12 +29,19 @@ def data(small_dataset: Path) -> Path:
     return small_dataset
 
 
-@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
-def test_dataset_to_bag_to_dataset(data: Path, tmp_path: Path, storage: str) -> None:
-    bag = rosbag.export_bag(data, tmp_path / "bag", storage=storage, progress=False)
-    with Reader(bag) as reader:  # what a ROS user sees
+@pytest.mark.parametrize("bag_format", ["mcap", "sqlite3", "ros1"])
+def test_dataset_to_bag_to_dataset(data: Path, tmp_path: Path, bag_format: str) -> None:
+    ros1 = bag_format == "ros1"
+    out = tmp_path / ("bag.bag" if ros1 else "bag")
+    bag = rosbag.export_bag(data, out, bag_format=bag_format, progress=False)
+    assert bag.is_file() if ros1 else bag.is_dir()
+    with (rosbag1 if ros1 else rosbag2).Reader(bag) as reader:  # what a ROS user sees
         types = {c.topic: c.msgtype for c in reader.connections}
+        digests = {c.topic: c.digest for c in reader.connections}
         stamps = [t for _, t, _ in reader.messages()]
+    if ros1:  # ROS 1's md5sums of the standard messages: rosbag play and rqt_bag accept the file
+        assert digests["/scan"] == "90c7ef2dc6895d81024acba2ac42f369"
+        assert digests["/camera/image_raw/compressed"] == "8f7a12909da2c9d3332d540a0977563f"
     assert types == {
         "/camera/image_raw/compressed": "sensor_msgs/msg/CompressedImage",
         "/scan": "sensor_msgs/msg/LaserScan",
@@ -76,16 +84,12 @@ def test_an_imported_dataset_trains(data: Path, tmp_path: Path, capsys: pytest.C
     assert (train(config, tmp_path / "net", progress=False) / "best.safetensors").is_file()
 
 
-def _twist(linear: float, angular: float):
-    return rosbag.twist_msg(linear, angular)
-
-
-def _frame_msg(rgb: np.ndarray, ns: int, raw: bool):
+def _frame_msg(rgb: np.ndarray, ns: int, raw: bool, ts):
     if not raw:
-        return rosbag.image_msg(encode_jpeg(rgb, 90), ns)
+        return rosbag.image_msg(encode_jpeg(rgb, 90), ns, ts)
     h, w, _ = rgb.shape
-    return rosbag.TYPESTORE.types["sensor_msgs/msg/Image"](
-        header=rosbag.header_msg(ns, "camera"),
+    return ts.types["sensor_msgs/msg/Image"](
+        header=rosbag.header_msg(ns, "camera", ts),
         height=h,
         width=w,
         encoding="bgr8",
@@ -100,58 +104,70 @@ def write_bag(
     frames_ms: list[int],
     cmds: list[tuple[int, float, float]],
     scan_stamps_ms: list[int] | None = None,
-    scan_type: str = "sensor_msgs/msg/LaserScan",
+    scan_type: str | None = "sensor_msgs/msg/LaserScan",
     raw: bool = False,
+    ros1: bool = False,
 ) -> Path:
     """A recording as a robot makes one: frames and scans stamped in their headers, commands as sent
-    (logged when sent: a Twist has no header); `scan_stamps_ms` overrides the scans' header stamps.
-    `raw`: uncompressed bgr8 frames on /camera/image_raw and TwistStamped commands, logged 100 ms
-    late (the import must use their header stamps)."""
-    ts = rosbag.TYPESTORE
+    (logged when sent: a Twist has no header); `scan_stamps_ms` overrides the scans' header stamps,
+    `scan_type` None records no scans (a robot without a LiDAR). `raw`: uncompressed bgr8 frames on
+    /camera/image_raw and TwistStamped commands, logged 100 ms late (the import must use their header
+    stamps). `ros1`: a ROS 1 .bag file, in which two nodes take turns commanding (ROS 1 makes one
+    connection per node)."""
+    ts = rosbag.ROS1_TYPESTORE if ros1 else rosbag.TYPESTORE
+    serialize = ts.serialize_ros1 if ros1 else ts.serialize_cdr
     rgb = np.zeros((24, 32, 3), np.uint8) + np.array([10, 120, 230], np.uint8)
-    with Writer(path, version=9) as writer:
-        if raw:
-            image = writer.add_connection("/camera/image_raw", "sensor_msgs/msg/Image", typestore=ts)
-            cmd = writer.add_connection("/cmd_vel", "geometry_msgs/msg/TwistStamped", typestore=ts)
-        else:
-            image = writer.add_connection(
-                "/camera/image_raw/compressed", "sensor_msgs/msg/CompressedImage", typestore=ts
-            )
-            cmd = writer.add_connection("/cmd_vel", "geometry_msgs/msg/Twist", typestore=ts)
-        scan = writer.add_connection("/scan", scan_type, typestore=ts)
+    writer = rosbag1.Writer(path) if ros1 else rosbag2.Writer(path, version=9)
+    with writer:
+        image_type = "sensor_msgs/msg/Image" if raw else "sensor_msgs/msg/CompressedImage"
+        cmd_type = "geometry_msgs/msg/TwistStamped" if raw else "geometry_msgs/msg/Twist"
+        image = writer.add_connection(
+            "/camera/image_raw" if raw else "/camera/image_raw/compressed", image_type, typestore=ts
+        )
+        nodes = [{"callerid": "/teleop"}, {"callerid": "/policy"}] if ros1 else [{}]
+        cmd = [writer.add_connection("/cmd_vel", cmd_type, typestore=ts, **node) for node in nodes]
         odom = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=ts)
-        messages = [(t * MS, image, _frame_msg(rgb, t * MS, raw)) for t in frames_ms]
-        stamps = frames_ms if scan_stamps_ms is None else scan_stamps_ms
-        for t, stamp in zip(frames_ms, stamps, strict=True):  # logged with the frame, stamped as given
-            msg = (
-                rosbag.scan_msg(np.full(360, 1.5, np.float32), stamp * MS, rosbag.LidarConfig())
-                if scan_type.endswith("LaserScan")
-                else ts.types[scan_type](data="not a scan")
-            )
-            messages.append((t * MS, scan, msg))
-            messages.append((t * MS, odom, rosbag.odom_msg(np.array([t / 1000, 0, 0]), 0.5, 0.0, t * MS)))
-        for t, lin, ang in cmds:
-            if raw:
-                stamped = ts.types["geometry_msgs/msg/TwistStamped"](
-                    header=rosbag.header_msg(t * MS, "base_link"), twist=_twist(lin, ang)
+        messages = [(t * MS, image, _frame_msg(rgb, t * MS, raw, ts)) for t in frames_ms]
+        for t in frames_ms:
+            pose = np.array([t / 1000, 0, 0])
+            messages.append((t * MS, odom, rosbag.odom_msg(pose, 0.5, 0.0, t * MS, ts)))
+        if scan_type is not None:
+            scan = writer.add_connection("/scan", scan_type, typestore=ts)
+            stamps = frames_ms if scan_stamps_ms is None else scan_stamps_ms
+            for t, stamp in zip(frames_ms, stamps, strict=True):  # logged with the frame, stamped as given
+                msg = (
+                    rosbag.scan_msg(np.full(360, 1.5, np.float32), stamp * MS, rosbag.LidarConfig(), ts)
+                    if scan_type.endswith("LaserScan")
+                    else ts.types[scan_type](data="not a scan")
                 )
-                messages.append(((t + 100) * MS, cmd, stamped))
+                messages.append((t * MS, scan, msg))
+        for i, (t, lin, ang) in enumerate(cmds):
+            twist = rosbag.twist_msg(lin, ang, ts)
+            if raw:
+                stamped = ts.types[cmd_type](header=rosbag.header_msg(t * MS, "base_link", ts), twist=twist)
+                messages.append(((t + 100) * MS, cmd[i % len(cmd)], stamped))
             else:
-                messages.append((t * MS, cmd, _twist(lin, ang)))
+                messages.append((t * MS, cmd[i % len(cmd)], twist))
         for ns, conn, msg in sorted(messages, key=lambda m: m[0]):
-            writer.write(conn, ns, ts.serialize_cdr(msg, conn.msgtype))
+            writer.write(conn, ns, serialize(msg, conn.msgtype))
     return path
 
 
-@pytest.mark.parametrize("raw", [False, True], ids=["compressed+Twist", "bgr8+TwistStamped"])
-def test_a_recording_is_cut_where_the_robot_stops_or_the_frames_stop(tmp_path: Path, raw: bool) -> None:
+@pytest.mark.parametrize(
+    ("raw", "ros1"),
+    [(False, False), (True, False), (True, True)],
+    ids=["compressed+Twist", "bgr8+TwistStamped", "ROS 1 bgr8+TwistStamped"],
+)
+def test_a_recording_is_cut_where_the_robot_stops_or_the_frames_stop(
+    tmp_path: Path, raw: bool, ros1: bool
+) -> None:
     # 4 Hz frames; each command is sent 30 ms after its frame (the node's latency). Frames 0-9 drive,
     # 10-14 stand still, 15-24 drive, then 3 s without frames, then 25-32 drive.
     frames = [250 * i for i in range(25)] + [250 * 24 + 3000 + 250 * i for i in range(1, 9)]
     linear = [0.5] * 10 + [0.0] * 5 + [0.5] * 18
     angular = [round(0.1 * (i % 7) - 0.3, 1) for i in range(len(frames))]
     cmds = [(t + 30, v, w) for t, v, w in zip(frames, linear, angular, strict=True)]
-    bag = write_bag(tmp_path / "rec", frames, cmds, raw=raw)
+    bag = write_bag(tmp_path / ("rec.bag" if ros1 else "rec"), frames, cmds, raw=raw, ros1=ros1)
     topics = rosbag.Topics(image="/camera/image_raw") if raw else rosbag.Topics()
     config = rosbag.ImportConfig(topics=topics, val_runs=1)
     dataset = rosbag.import_bag(bag, tmp_path / "data", config, progress=False)
@@ -191,29 +207,116 @@ def test_a_bad_bag_is_named_and_leaves_nothing(tmp_path: Path, data: Path) -> No
     with pytest.raises(DataError, match="stamps on /scan are not increasing: message 10"):
         rosbag.import_bag(late, out, progress=False)
 
+    still = write_bag(tmp_path / "still.bag", frames, [(t + 30, 0.0, 0.0) for t in frames], ros1=True)
+    with pytest.raises(ConfigError, match=r"still.bag: no run found \(no frame while the robot drove, with"):
+        rosbag.import_bag(still, out, progress=False)
+    assert main(["bag", "import", str(still), "--out", str(out)]) == 2
+
+    (tmp_path / "empty").mkdir()
+    for neither in (good / "metadata.yaml", tmp_path / "empty"):  # a file not named .bag; no metadata.yaml
+        with pytest.raises(ConfigError, match=f"{neither}: neither a ROS 1 bag .* nor a rosbag2 bag"):
+            rosbag.import_bag(neither, out, progress=False)
+        assert main(["bag", "import", str(neither), "--out", str(out)]) == 2
+
     cut = rosbag.export_bag(data, tmp_path / "cut", progress=False)
     (mcap,) = cut.glob("*.mcap")
-    with open(mcap, "r+b") as f:
-        f.truncate(mcap.stat().st_size // 2)
-    with pytest.raises(DataError, match="cut: not a readable rosbag2 bag"):
-        rosbag.import_bag(cut, out, progress=False)
-    assert main(["bag", "import", str(cut), "--out", str(out)]) == 1
+    cut1 = write_bag(tmp_path / "cut1.bag", frames, cmds, ros1=True)
+    for path, kind in ((mcap, "rosbag2"), (cut1, "rosbag1")):
+        with open(path, "r+b") as f:
+            f.truncate(path.stat().st_size // 2)
+        bag = cut if kind == "rosbag2" else cut1
+        with pytest.raises(DataError, match=f"{bag.name}: not a readable {kind} bag"):
+            rosbag.import_bag(bag, out, progress=False)
+        assert main(["bag", "import", str(bag), "--out", str(out)]) == 1
     assert _nothing_left(tmp_path, out)
 
-    with pytest.raises(ConfigError, match="--storage must be one of"):
-        rosbag.export_bag(data, tmp_path / "x", storage="bag")
-    assert _nothing_left(tmp_path, tmp_path / "x")
+
+def test_a_bad_export_format_exits_2_and_writes_nothing(
+    data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "bag"
+    assert main(["bag", "export", str(data), "--out", str(out), "--format", "ros2"]) == 2
+    assert "--format must be one of mcap, sqlite3, ros1, got 'ros2'" in capsys.readouterr().err
+    assert main(["bag", "export", str(data), "--out", str(out), "--format", "ros1"]) == 2  # not *.bag
+    assert "a ROS 1 bag is one file named *.bag" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
 
 
-def test_another_lidar_is_resampled_to_one_ray_per_degree() -> None:
-    # an LDS-02-like scan: 720 rays from −180°, 0.5° apart; ray j reads 1 + j / 1000 m
-    step = np.deg2rad(0.5)
-    ranges = (1 + np.arange(720) / 1000).astype(np.float32)
-    ranges[[0, 1, 2]] = [np.nan, 0.05, 9.0]  # NaN, below range_min, beyond range_max
-    msg = rosbag.scan_msg(np.zeros(360, np.float32), 0, rosbag.LidarConfig())
-    msg = type(msg)(**{**msg.__dict__, "angle_min": -np.pi, "angle_increment": step, "ranges": ranges})
-    rays = rosbag._scan_to_rays(msg)
+def test_a_camera_only_recording_imports_with_an_empty_scan_topic(tmp_path: Path) -> None:
+    frames = [250 * i for i in range(30)]
+    cmds = [(t + 30, 0.5, 0.1) for t in frames]
+    bag = write_bag(tmp_path / "camera.bag", frames, cmds, scan_type=None, ros1=True)
+    out = tmp_path / "data"
+    missing = r"no topic /scan \(--scan-topic\); the bag has /camera/image_raw/compressed, /cmd_vel, /odom$"
+    with pytest.raises(ConfigError, match=missing):
+        rosbag.import_bag(bag, out, progress=False)
+    assert main(["bag", "import", str(bag), "--out", str(out)]) == 2
+    assert _nothing_left(tmp_path, out)
+
+    assert main(["bag", "import", str(bag), "--out", str(out), "--scan-topic", ""]) == 0
+    dataset = Dataset.open(out)
+    assert dataset.verify() == [] and dataset.config["source"] == "rosbag1"
+    (entry,) = dataset.entries()
+    run = dataset.read_run(entry)
+    assert run.n_frames == 30 and run.scans.shape == (30, 360) and run.bins.shape == (30, 26)
+    assert np.isposinf(run.scans).all() and np.isnan(run.bins).all()  # nothing measured
+    assert np.allclose(run.actions[:-1], 0.1) and np.allclose(run.poses[:, 0], np.asarray(frames) / 1000)
+
+
+def _laser(angle_min: float, increment_deg: float, ranges: np.ndarray):
+    """A LaserScan as a driver publishes it and a bag gives it back (float32 angles): beam j at
+    angle_min + j · increment, range 0.12 to 3.5 m."""
+    ts, msgtype = rosbag.TYPESTORE, "sensor_msgs/msg/LaserScan"
+    increment = np.deg2rad(increment_deg)
+    msg = ts.types[msgtype](
+        header=rosbag.header_msg(0, "laser"),
+        angle_min=angle_min,
+        angle_max=angle_min + increment * (len(ranges) - 1),
+        angle_increment=increment,
+        time_increment=0.0,
+        scan_time=0.0,
+        range_min=0.12,
+        range_max=3.5,
+        ranges=np.asarray(ranges, np.float32),
+        intensities=np.zeros(0, np.float32),
+    )
+    return ts.deserialize_cdr(ts.serialize_cdr(msg, msgtype), msgtype)
+
+
+NO = -1  # no beam within half a spacing: the bearing reads 0 (invalid)
+BEARING = np.arange(360)
+
+
+@pytest.mark.parametrize(
+    ("n_beams", "angle_min", "increment_deg", "beam_of_bearing"),
+    [
+        (360, 0.0, 1.0, BEARING),  # the LDS-01: 0° to 359° counter-clockwise
+        (720, 0.0, 0.5, 2 * BEARING),  # 0.5° apart: every other beam
+        (360, -np.pi, 1.0, (BEARING + 180) % 360),  # −180° to 179°: beam 180 looks ahead
+        (361, -np.pi, 1.0, (BEARING + 180) % 360),  # −180° to +180°: beams 0 and 360 look back; the first
+        (180, 0.0, 2.0, np.r_[BEARING[:359] // 2, 0]),  # 2° apart: an odd bearing takes the first of two
+        (181, np.pi / 2, -1.0, np.r_[90 - BEARING[:91], [NO] * 179, 450 - BEARING[270:]]),  # clockwise ±90°
+        (1081, -0.75 * np.pi, 0.25, np.r_[540 + 4 * BEARING[:136], [NO] * 89, 4 * BEARING[225:] - 900]),
+    ],
+    ids=["360-ccw", "720-half-degree", "360-from-minus-pi", "361-minus-pi-to-pi", "180-two-degrees",
+         "181-clockwise-front", "1081-270-degrees"],
+)
+def test_a_laser_scan_is_resampled_to_the_nearest_beam_of_each_degree(
+    n_beams: int, angle_min: float, increment_deg: float, beam_of_bearing: np.ndarray
+) -> None:
+    ranges = (1 + np.arange(n_beams) / 1000).astype(np.float32)  # beam j reads 1 + j / 1000 m
+    rays = rosbag._scan_to_rays(_laser(angle_min, increment_deg, ranges))
     assert rays.shape == (360,) and rays.dtype == np.float32
-    assert rays[0] == ranges[360] and rays[90] == ranges[540] and rays[270] == ranges[180]
-    assert rays[180] == 0.0  # ray 0 (−180°): NaN → invalid
-    assert np.isinf(rays[181])  # ray 2 (−179°): beyond range_max → no return
+    expected = np.where(beam_of_bearing == NO, 0.0, ranges[beam_of_bearing]).astype(np.float32)
+    assert np.array_equal(rays, expected)
+
+
+def test_invalid_readings_read_as_the_lds01_reports_them() -> None:
+    ranges = np.full(360, 2.0, np.float32)
+    ranges[:8] = [np.nan, 0.05, -np.inf, 0.0, 0.12, 3.5, 3.6, np.inf]
+    rays = rosbag._scan_to_rays(_laser(0.0, 1.0, ranges))
+    # NaN, below range_min (−inf and 0 too) → 0, invalid; range_min and range_max themselves are kept;
+    # beyond range_max (+inf too) → inf, no return
+    assert np.array_equal(rays[:8], np.array([0, 0, 0, 0, 0.12, 3.5, np.inf, np.inf], np.float32))
+    assert (rays[8:] == 2.0).all()
+    assert np.array_equal(rosbag._scan_to_rays(_laser(0.0, 1.0, np.zeros(0))), np.zeros(360, np.float32))

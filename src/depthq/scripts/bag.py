@@ -1,4 +1,4 @@
-"""ROS 2 bags: a dataset out as a bag a ROS user can open, a robot's recording in as a dataset."""
+"""ROS 1 and ROS 2 bags: a dataset out as a bag a ROS user can open, a robot's recording in as a dataset."""
 
 from __future__ import annotations
 
@@ -12,15 +12,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # No defaults here: depthq.data.rosbag needs the optional rosbags package, so its Topics and
     # ImportConfig fill in what is not given (the TurtleBot3's topic names, a 1 s gap, 1 val run).
     actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
-    out = actions.add_parser("export", help="a dataset's runs as a rosbag2 folder (MCAP or SQLite3)")
+    out = actions.add_parser("export", help="a dataset's runs as a bag (rosbag2 MCAP or SQLite3, or ROS 1)")
     out.add_argument("data", type=Path, help="dataset folder")
-    out.add_argument("--out", type=Path, required=True, help="new bag folder")
-    out.add_argument("--storage", default="mcap", help="mcap (default) or sqlite3")
-    into = actions.add_parser("import", help="a robot's recording (rosbag2 folder) as a new dataset folder")
-    into.add_argument("bag", type=Path, help="rosbag2 folder")
+    out.add_argument("--out", type=Path, required=True, help="new bag folder, or file *.bag for ros1")
+    out.add_argument("--format", "--storage", dest="format", default="mcap",  # --storage: the old name
+                     help="mcap (default), sqlite3 or ros1 (a .bag file)")
+    into = actions.add_parser("import", help="a robot's recording (ROS 1 or rosbag2) as a new dataset folder")
+    into.add_argument("bag", type=Path, help="a ROS 1 *.bag file or a rosbag2 folder (with metadata.yaml)")
     into.add_argument("--out", type=Path, required=True, help="new dataset folder")
     into.add_argument("--image-topic", help="camera topic (default /camera/image_raw/compressed)")
-    into.add_argument("--scan-topic", help="LiDAR topic (default /scan)")
+    into.add_argument("--scan-topic", help="LiDAR topic (default /scan; '' imports a camera-only recording)")
     into.add_argument("--cmd-topic", help="command topic (default /cmd_vel)")
     into.add_argument("--odom-topic", help="odometry topic (default /odom; '' imports without poses)")
     into.add_argument("--max-gap", type=float, help="seconds between frames that end a run (default 1)")
@@ -35,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
             raise
         raise ConfigError('depthq bag needs the rosbags package: pip install "depthq[ros]"') from None
     if args.action == "export":
-        path = rosbag.export_bag(args.data, args.out, storage=args.storage)
+        path = rosbag.export_bag(args.data, args.out, bag_format=args.format)
         print(f"wrote {path}")
         return 0
     given = {
