@@ -164,12 +164,12 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
 
 def compare(named: list[tuple[str, Path]]) -> str:
     """Markdown: one row per (name, evaluation folder), e.g. a checkpoint driven with `--which last`."""
-    lines = ["| policy | evaluation | to first collision (m) | ends reached /20 | collisions |",
-             "|---|---|---|---|---|"]
+    lines = ["| policy | evaluation | to first collision (m) | ends reached /20 | collisions | successes |",
+             "|---|---|---|---|---|---|"]
     for name, folder in named:
         s = json.loads((Path(folder) / "summary.json").read_text())["summary"]
         lines.append(f"| {name} | `{Path(folder).name}` | {s['distance_to_collision_mean']:.2f} | "
-                     f"{s['reached_end']} | {s['collisions']} |")
+                     f"{s['reached_end']} | {s['collisions']} | {s['successes']} |")
     return "\n".join(lines)
 
 
