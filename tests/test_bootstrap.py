@@ -89,5 +89,12 @@ def test_a_depth_first_training_fits_both_parts_and_drives(small_dataset: Path, 
     from depthq.control.qnet_policy import QNetPolicy
 
     policy = QNetPolicy.from_checkpoint(folder)
-    frame = np.zeros((308, 410, 3), np.uint8)
+    frame = np.random.default_rng(0).integers(0, 256, (308, 410, 3), np.uint8)
     assert policy.act({"image": frame}) in (-1.0, 0.0, 1.0) and policy.last_values.shape == (3, 26)
+    pytest.importorskip("onnxruntime")
+    from depthq.control.onnx_policy import OnnxPolicy
+    from depthq.deploy.onnx_export import export_onnx
+
+    exported = OnnxPolicy(export_onnx(folder, tmp_path / "onnx"))  # the camera alone drives it
+    assert exported.act({"image": frame}) == policy.act({"image": frame})
+    np.testing.assert_allclose(exported.last_values, policy.last_values, atol=1e-5)
