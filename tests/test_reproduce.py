@@ -168,9 +168,12 @@ def test_probe_runs_every_part_end_to_end(tmp_path, capsys):
     args = ["--hz", "4", "--stats-runs", "4", "--runs", "3", "--epochs", "1", "--canyons", "val:1000"]
     assert main(["probe", *args, "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "paper" in printed and "oracle at 4 Hz" in printed and "Depth-Q-Net on 3 runs at 4 Hz" in printed
+    assert "paper" in printed and "oracle depth:1 at 4 Hz" in printed
+    assert "Depth-Q-Net on 3 runs at 4 Hz" in printed
     result = read_json(out / "probe.json")
-    assert result["stats"][0]["runs"] == 4 and result["oracle"][0]["canyons"] == "val:1000"
+    oracle = result["oracle"][0]
+    assert result["stats"][0]["runs"] == 4 and oracle["canyons"] == 1 and oracle["oracle"] == "depth:1"
+    assert oracle["runs"][0]["canyon"] == "val:1000"
     assert result["dqn"]["4"]["runs"] == 1 and (out / "hz4" / "depth_n3" / "best.safetensors").is_file()
 
 
