@@ -30,7 +30,7 @@ import numpy as np
 from depthq.control.action_selection import ACTIONS, TIE_TOL, Selection, pick_best, sequence_scores
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE
-from depthq.sim.canyon import FAMILIES, CanyonId, nearest_on_polyline
+from depthq.sim.canyon import FAMILIES, Canyon, CanyonId, nearest_on_polyline
 from depthq.sim.env import COLLISIONS, CanyonEnv, EnvConfig
 from depthq.sim.sensors import bump, depth_bins, finish_scan
 from depthq.sim.world import WorldConfig, world_for
@@ -185,11 +185,8 @@ def _checkpoint_policy(summary: dict[str, Any]) -> Any:
                                       selection=selection)
 
 
-def _obstacle_kind(canyon_id: str, family_config: Any, xy: np.ndarray) -> str:
+def _obstacle_kind(canyon: Canyon, xy: np.ndarray) -> str:
     """'pillar' when the nearest obstacle at `xy` is a pillar's surface, else 'wall'."""
-    from depthq.sim.canyon import generate_canyon
-
-    canyon = generate_canyon(CanyonId.parse(canyon_id), family_config)
     wall = min(float(nearest_on_polyline(line, xy[None])[0][0]) for line in (canyon.left, canyon.right))
     if not len(canyon.obstacles):
         return "wall"
@@ -234,7 +231,7 @@ def agreement(
             sim.load(record["canyon"])
             collided = record["end_reason"] in COLLISIONS
             if collided:
-                hits.append(_obstacle_kind(record["canyon"], sim.env.world.config.canyon, poses[-1, :2]))
+                hits.append(_obstacle_kind(sim.env.world.canyon, poses[-1, :2]))  # the canyon just loaded
             for t, action in enumerate(actions):
                 pose = poses[t].astype(np.float64)
                 true_bins, bumped = sim.truth(oracle, pose)

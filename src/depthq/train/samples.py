@@ -84,9 +84,8 @@ class FeatureSamples(Samples):
         super().__init__(arrays)
         following_rows = {**arrays, "frame_id": arrays["frame_id"] + 1}
         tables = (table,) if mirrored is None else (table, mirrored)
-        self.features = torch.stack([t.gather(split, arrays) for t in tables])  # (1 or 2, S, D)
-        self.following = (torch.stack([t.gather(split, following_rows) for t in tables]) if following
-                          else None)
+        self.features = _stack([t.gather(split, arrays) for t in tables])  # (1 or 2, S, D)
+        self.following = _stack([t.gather(split, following_rows) for t in tables]) if following else None
         self.targets = torch.stack([self.targets, self.targets.flip(-1) if self.targets.ndim > 1
                                     else self.targets])[: len(tables)]
         if self.current is not None:
@@ -107,6 +106,11 @@ class FeatureSamples(Samples):
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)
+
+
+def _stack(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """(len, …): one tensor as a view (no copy of a large feature table), two stacked."""
+    return tensors[0][None] if len(tensors) == 1 else torch.stack(tensors)
 
 
 class ImageSamples(Samples):
