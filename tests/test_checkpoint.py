@@ -203,9 +203,16 @@ def test_a_sweep_varies_select_and_snapshots() -> None:
     assert parse_setting("snapshots=40,20+40") == ("snapshots", ((40,), (20, 40)))
     grid = (parse_setting("select=final"), parse_setting("epochs=3"), parse_setting("snapshots=1+2"))
     sweep = replace(get_preset("smoke"), grid=grid)
-    model = sweep.models()[0]
-    assert model.name.endswith("_selectfinal_epochs3_snapshots1+2")
-    config = sweep.train_config(model, "data")
-    assert (config.select, config.epochs, config.snapshots) == ("final", 3, (1, 2))
+    depth, coll = sweep.models()[:2]
+    # A setting names a model where it differs from that network's own default: a depth-first
+    # Depth-Q-Net selects its final weights unless told, a Coll-Q-Net its best.
+    assert (depth.net, coll.net) == ("depth", "coll")
+    assert depth.name == "depth_n3_s0_epochs3_snapshots1+2"
+    assert coll.name == "coll_n3_s0_selectfinal_epochs3_snapshots1+2"
+    for model in (depth, coll):
+        config = sweep.train_config(model, "data")
+        assert (config.select, config.epochs, config.snapshots) == ("final", 3, (1, 2))
+    best = replace(sweep, grid=(parse_setting("select=best"),)).models()[0]
+    assert best.name == "depth_n3_s0_selectbest"
     with pytest.raises(ConfigError, match=r"epoch 4 is not one of this training's epochs 1\.\.3"):
         replace(sweep, grid=(*grid[:2], parse_setting("snapshots=4")))

@@ -236,9 +236,17 @@ def test_benches_measure_each_precision(data: Path, capsys: pytest.CaptureFixtur
         return json.loads(capsys.readouterr().out.strip().splitlines()[-1])
 
     result = bench("train", "--precision", "fp32,bf16", "--seconds", "1", "--threads", "1")
-    assert list(result["precisions"]) == ["fp32", "bf16"] and result["threads"] == 1
-    assert all(p["samples_per_s"] > 0 for p in result["precisions"].values())
-    assert result["samples_per_s"] == result["precisions"]["fp32"]["samples_per_s"]
+    assert list(result["variants"]) == ["depth_first/fp32", "depth_first/bf16"] and result["threads"] == 1
+    assert all(p["samples_per_s"] > 0 for p in result["variants"].values())
+    assert result["samples_per_s"] == result["variants"]["depth_first/fp32"]["samples_per_s"]
+    # The paper's head beside the default: the same 4096-wide first layer, the dynamics' is 27 wide.
+    result = bench("train", "--head-form", "depth_first,concat", "--seconds", "1", "--threads", "1")
+    forms = result["variants"]
+    assert list(forms) == ["depth_first/fp32", "concat/fp32"]
+    assert forms["depth_first/fp32"]["head_gflops"] / forms["depth_first/fp32"]["samples_per_s"] > (
+        forms["concat/fp32"]["head_gflops"] / forms["concat/fp32"]["samples_per_s"])
+    assert main(["bench", "train", "--head-form", "dueling", "--seconds", "1"]) == 2
+    assert "dueling" in capsys.readouterr().err
     result = bench("features", "--data", str(data), "--frames", "32", "--precision", "bf16,fp32")
     assert list(result["precisions"]) == ["bf16", "fp32"]
     assert all(p["frames"] >= 32 and p["frames_per_s"] > 0 for p in result["precisions"].values())

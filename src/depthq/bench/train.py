@@ -25,27 +25,32 @@ POOL = 8192  # cached-feature-like rows to draw batches from
 
 def bench_train(
     seconds: float = 10.0, device: str = "auto", precisions: tuple[str, ...] = ("fp32",),
-    threads: int | None = None,
+    threads: int | None = None, forms: tuple[str | None, ...] = (None,),
 ) -> dict:
     """Depth-Q-Net head training samples/s (batch 64, 1280-d features, 4096 hidden, Adadelta) and its
-    FLOP/s as a fraction of what fp32 `torch.matmul` reaches on the head's largest GEMM in the same run,
-    for each of `precisions` (`TrainConfig.precision`), their rounds interleaved so that all see the
-    same machine load; `threads` None: this process's cores. The first precision's figures are also
-    the result's own keys.
+    FLOP/s as a fraction of what fp32 `torch.matmul` reaches on a 1281 × 4096 GEMM in the same run,
+    for each head form of `forms` (`TrainConfig.head_form`; None: the default) and each of
+    `precisions` (`TrainConfig.precision`), their rounds interleaved so that all see the same machine
+    load; `threads` None: this process's cores. The first variant's figures are also the result's own
+    keys; `variants` holds each as "FORM/PRECISION".
 
-    Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); the hidden layer's input
-    gradient is never computed (features need none), so `ratio_actual` counts the work really done.
+    Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); a layer fed data (the
+    feature, a depth-first head's true current bins) needs no input gradient, so `ratio_actual`
+    counts the work really done.
     """
     check_precisions(precisions, "bench train")
     where = resolve_device(device)
     torch.set_num_threads(threads or cores())
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
-    config = TrainConfig(model="depth", data="-")
-    head = config.head()
-    models = {p: QNet(build_trunk(config.trunk, pretrained=False), build_head(head)).to(where)
-              for p in precisions}
-    optimizers = {p: make_optimizer(m, config.learning_rate, config.weight_decay) for p, m in models.items()}
+    configs = {form: TrainConfig(model="depth", data="-", head_form=form) for form in dict.fromkeys(forms)}
+    variants = [(config, precision) for config in configs.values() for precision in precisions]
+    names = [f"{config.head_form}/{precision}" for config, precision in variants]
+    models = {name: QNet(build_trunk(config.trunk, pretrained=False), build_head(config.head())).to(where)
+              for name, (config, _) in zip(names, variants, strict=True)}
+    optimizers = {name: make_optimizer(models[name], config.learning_rate, config.weight_decay)
+                  for name, (config, _) in zip(names, variants, strict=True)}
+    head = next(iter(configs.values())).head()
     rng = np.random.default_rng(0)
     arrays = {
         "run_offsets": np.array([0, POOL]),
@@ -53,46 +58,45 @@ def bench_train(
         "frame_id": np.arange(POOL),
         "action": rng.uniform(-1, 1, POOL).astype(np.float32),
         "target": rng.uniform(0.2, 2.5, (POOL, head.n_bins)).astype(np.float32),
+        "current": rng.uniform(0.2, 2.5, (POOL, head.n_bins)).astype(np.float32),
     }
     features = rng.uniform(0, 6, (POOL, head.feature_dim)).astype(np.float16)
     samples = FeatureSamples(arrays, FeatureTable(features, {"train_000000": (0, POOL)}, False), "train")
     x = torch.rand(BATCH, head.feature_dim + 1, device=where)
     w = torch.rand(head.feature_dim + 1, head.hidden, device=where)
 
-    def head_step(precision: str) -> None:
+    def head_step(name: str, precision: str) -> None:
         batch = samples.batch(samples.draw(BATCH, rng)).to(where)
         # its loss.item() waits for the device
-        train_step(models[precision], samples, batch, depth_l1_loss, optimizers[precision], precision)
+        train_step(models[name], samples, batch, depth_l1_loss, optimizers[name], precision)
 
     def matmul() -> None:
         torch.matmul(x, w).sum().item()  # .item(): wait for the device, as a training step does
 
     for model in models.values():
         model.train()
-    head_s = dict.fromkeys(precisions, 0.0)
-    head_n = dict.fromkeys(precisions, 0)
+    head_s = dict.fromkeys(names, 0.0)
+    head_n = dict.fromkeys(names, 0)
     matmul_s, matmul_n = 0.0, 0
     for _ in range(3):  # warm-up
-        for precision in precisions:
-            head_step(precision)
+        for name, (_, precision) in zip(names, variants, strict=True):
+            head_step(name, precision)
         matmul()
     rounds = max(1, round(seconds))
     for _ in range(rounds):  # alternate, so all see the same machine load
-        for precision in precisions:
-            n, dt = _timed(lambda p=precision: head_step(p), 0.75 * seconds / rounds / len(precisions))
-            head_n[precision], head_s[precision] = head_n[precision] + n, head_s[precision] + dt
+        for name, (_, precision) in zip(names, variants, strict=True):
+            n, dt = _timed(lambda a=name, p=precision: head_step(a, p), 0.75 * seconds / rounds / len(names))
+            head_n[name], head_s[name] = head_n[name] + n, head_s[name] + dt
         n, dt = _timed(matmul, 0.25 * seconds / rounds)
         matmul_n, matmul_s = matmul_n + n, matmul_s + dt
-    d, h, k = head.feature_dim + 1, head.hidden, head.n_bins
-    forward = 2 * (d * h + h * k)  # FLOPs per sample
-    actual = 2 * 2 * d * h + 3 * 2 * h * k
-    matmul_flops = matmul_n * 2 * BATCH * d * h / matmul_s
+    matmul_flops = matmul_n * 2 * BATCH * (head.feature_dim + 1) * head.hidden / matmul_s
     each = {}
-    for precision in precisions:
-        samples_per_s = head_n[precision] * BATCH / head_s[precision]
-        each[precision] = {
+    for name in names:
+        forward, actual = _step_flops(models[name].head)
+        samples_per_s = head_n[name] * BATCH / head_s[name]
+        each[name] = {
             "samples_per_s": round(samples_per_s, 1),
-            "steps_per_s": round(head_n[precision] / head_s[precision], 2),
+            "steps_per_s": round(head_n[name] / head_s[name], 2),
             "head_gflops": round(3 * forward * samples_per_s / 1e9, 2),
             "ratio": round(3 * forward * samples_per_s / matmul_flops, 3),
             "ratio_actual": round(actual * samples_per_s / matmul_flops, 3),
@@ -100,11 +104,23 @@ def bench_train(
     return {
         "device": str(where),
         "threads": torch.get_num_threads(),
-        **each[precisions[0]],
+        **each[names[0]],
         "matmul_gflops": round(matmul_flops / 1e9, 2),
-        "precisions": each,
+        "variants": each,
         "seconds": round(sum(head_s.values()) + matmul_s, 2),
     }
+
+
+def _step_flops(head: torch.nn.Module) -> tuple[int, int]:
+    """A training step's FLOPs per sample in `head`'s linear layers: forward, and the work really done
+    (forward, weight gradient, and an input gradient for every layer but those fed data: the first
+    of each path, whose input is the feature or the true current bins)."""
+    linears = [m for m in head.modules() if isinstance(m, torch.nn.Linear)]
+    firsts = {id(m) for m in linears if m.in_features in (head.config.feature_dim + head.config.lookahead,
+                                                          head.config.feature_dim, head.config.n_bins + 1)}
+    forward = sum(2 * m.in_features * m.out_features for m in linears)
+    actual = sum((2 if id(m) in firsts else 3) * 2 * m.in_features * m.out_features for m in linears)
+    return forward, actual
 
 
 def _timed(fn, seconds: float) -> tuple[int, float]:

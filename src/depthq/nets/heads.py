@@ -40,9 +40,17 @@ HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
 # "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
 # "depth_first": the current bins from the feature, then the next bins from them and the action.
 HEAD_FORMS: tuple[str, ...] = ("concat", "per_action", "depth_first")
+# A one-step Depth-Q-Net's default form (docs/oracle_gap.md#depth-first: it drives the hard `val` canyons
+# twice as far as "concat"); any other head knows only "concat".
+DEFAULT_DEPTH_FORM = "depth_first"
 ANCHORS = (-1.0, 0.0, 1.0)  # the actions a "per_action" head predicts; a command in between blends two
 COLL_HIDDEN = 25
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
+
+
+def default_form(kind: str, lookahead: int) -> str:
+    """The head form a `kind` head looking `lookahead` steps ahead gets unless told."""
+    return DEFAULT_DEPTH_FORM if kind == "depth" and lookahead == 1 else "concat"
 
 
 def _positive_int(value: object) -> bool:

@@ -33,13 +33,14 @@ from depthq.data.collect import CollectConfig, collect, collection_complete, exp
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import TRUNKS
 from depthq.parallel import LOCAL, Executor, Job, cores
 from depthq.report.build import best_depth_eval, build_report
 from depthq.report.presets import get_preset
 from depthq.report.sweep import SETUP_DEFAULTS, Sweep
-from depthq.train.checkpoint import saved_epoch
+from depthq.train.checkpoint import saved_epoch, settings_differing
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
 from depthq.train.trainer import train
@@ -62,7 +63,17 @@ def _eval_done(folder: Path) -> bool:
 
 
 def _trained(config: TrainConfig, folder: Path) -> bool:
-    return saved_epoch(folder) >= config.epochs
+    """Whether `folder` holds this training to its last epoch; one trained otherwise (a folder of a
+    sweep run before a default changed) is an error rather than a model reused under a wrong name."""
+    if saved_epoch(folder) < config.epochs:
+        return False
+    differing = settings_differing(read_config(folder), config)
+    if differing:
+        raise ConfigError(
+            f"{folder} was trained with other settings than this sweep's model of that name (differs in: "
+            f"{', '.join(differing)}); a default changed since? Name the setting (--set) or use another --out"
+        )
+    return True
 
 
 def _features_ready(data: Path, collect_config: CollectConfig, frozen: list[tuple[str, int]]) -> bool:

@@ -104,7 +104,9 @@ class Sweep:
 
     def models(self) -> list[Model]:
         """Seed-major: an interrupted sweep already holds a whole table for its first seed."""
-        own = self.train_config(Model(self.nets[0], self.subsets[0], self.seeds[0]), "data")
+        # Each network's own settings: a default may differ between them (`TrainConfig.head_form`).
+        first = self.subsets[0], self.seeds[0]
+        own = {net: self.train_config(Model(net, *first), "data") for net in self.nets}
         models = [
             Model(net, n, seed, variant)
             for seed in self.seeds
@@ -112,7 +114,7 @@ class Sweep:
             for n in self.subsets
             for net in self.nets
         ]
-        return [replace(m, differs=tuple((k, v) for k, v in m.settings if getattr(own, k) != v))
+        return [replace(m, differs=tuple((k, v) for k, v in m.settings if getattr(own[m.net], k) != v))
                 for m in models]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:

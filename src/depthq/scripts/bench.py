@@ -30,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     tr.add_argument("--precision", default="fp32",
                     help="precisions measured side by side, comma-separated: fp32,bf16 (train --precision)")
     tr.add_argument("--threads", type=int, default=None, help="torch threads (default: this process's cores)")
+    tr.add_argument("--head-form", default=None,
+                    help="Depth-Q-Net head forms measured side by side, comma-separated, e.g. "
+                         "depth_first,concat (train --head-form; default: the default head's)")
     pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
     pol.add_argument(
         "--policy", action="append", default=None,
@@ -113,9 +116,11 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         if args.threads is not None:
             _positive("--threads", args.threads)
         precisions = _precisions(args.precision)
-        r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads)
+        forms = (None,) if args.head_form is None else tuple(args.head_form.split(","))
+        r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads,
+                        forms=forms)
         each = [f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's"
-                + (f" ({name})" if len(precisions) > 1 else "") for name, p in r["precisions"].items()]
+                + (f" ({name})" if len(r["variants"]) > 1 else "") for name, p in r["variants"].items()]
         return r, "; ".join(each) + f" {r['matmul_gflops']} fp32 GFLOP/s ({r['threads']} threads)"
     if args.what == "evaluate":
         _positive("--workers", args.workers)

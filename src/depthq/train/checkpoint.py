@@ -30,6 +30,7 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -88,6 +89,18 @@ def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
 # --- starting and resuming -------------------------------------------------------------------------
 
 
+def settings_differing(record: dict[str, Any], config: TrainConfig) -> list[str]:
+    """The settings in which checkpoint `record` (`read_config`) was trained otherwise than `config`
+    asks, but for `epochs`, `data` and `snapshots`; [] for the same training."""
+    ignore = {"epochs", "data", "snapshots"}
+    old_train = {k: v for k, v in record.get("train", {}).items() if k not in ignore}
+    new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
+    differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
+    if record.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed
+        differing.append("learning_rate (the default for this model changed)")
+    return differing
+
+
 def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     """Whether `out` already holds this training (True: resume it) or is free (False).
 
@@ -104,12 +117,7 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
             raise ConfigError(f"--out {out}: exists, is not empty and holds no training ({CONFIG} missing)")
         return False
     old = read_config(out)
-    ignore = {"epochs", "data", "snapshots"}
-    old_train = {k: v for k, v in old.get("train", {}).items() if k not in ignore}
-    new_train = {k: v for k, v in to_dict(config).items() if k not in ignore}
-    differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
-    if old.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed
-        differing.append("learning_rate (the default for this model changed)")
+    differing = settings_differing(old, config)
     if dataset_record(old).fingerprint != fingerprint:
         differing.append("data (the dataset's runs changed)")
     if differing:

@@ -10,7 +10,7 @@ from depthq.data import DataConfig
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import SELECT
-from depthq.nets.heads import HEAD_KINDS, HeadConfig
+from depthq.nets.heads import HEAD_FORMS, HEAD_KINDS, HeadConfig, default_form
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
@@ -25,6 +25,9 @@ DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # within 8 % of the best of 60 for Depth-Q-Net (0.151 vs 0.139 at 50) and 10 % for Coll-Q-Net (0.058
 # vs 0.053); best.safetensors keeps the best epoch. 40 epochs ≈ 80 s per model on 2 CPU cores.
 DEFAULT_EPOCHS = 40
+# The weights a head form's checkpoint acts with by default (`TrainConfig.select`): the depth-first
+# head's best-validation epoch is a noisy pick of its summed perception and dynamics losses.
+DEFAULT_SELECT = {"depth_first": "final"}
 # The forward pass's arithmetic in training and validation (docs/benchmarks.md#precision).
 PRECISIONS = ("fp32", "bf16")
 
@@ -100,9 +103,11 @@ class TrainConfig:
     # Width of the head's hidden layer (the paper's 4096); its first layer is most of a head step's
     # arithmetic.
     hidden: int = field(default=4096, metadata=OMIT_DEFAULT)
-    # Depth-Q-Net's head form (`depthq.nets.heads.HEAD_FORMS`): "concat", the action appended to the
-    # feature (the paper's), or "per_action", the bins of each anchor action from one hidden pass.
-    head_form: str = field(default="concat", metadata=OMIT_DEFAULT)
+    # The head's form: "depth_first" (the current bins read from the feature, then the next bins from
+    # them and the action), "concat" (the action appended to the feature: the paper's head) or
+    # "per_action" (bins per anchor action). None: a one-step Depth-Q-Net's default, "depth_first"; a
+    # Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
+    head_form: str | None = None
     # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
     # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
     # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
@@ -119,9 +124,10 @@ class TrainConfig:
     action_clip: float = 1.0
     action_lag: int = 0
     # The weights a policy of this checkpoint uses unless told (`--which`): "best" (lowest validation
-    # loss) or "final" (after the last epoch: the original evaluated its final weights, no
-    # best-validation checkpoint). Training is the same either way.
-    select: str = "best"
+    # loss) or "final" (after the last epoch, as the original evaluated them). None: the head form's
+    # choice, made on `val` canyons: "final" for "depth_first", "best" for the others
+    # (docs/oracle_gap.md#depth-first). Training is the same either way.
+    select: str | None = None
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--which epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
@@ -132,6 +138,11 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.model not in HEAD_KINDS:
             raise ConfigError(f"train.model must be one of {HEAD_KINDS}, got {self.model!r}")
+        # Defaults that depend on other fields are resolved here, so a stored config names its choice.
+        if self.head_form is None and isinstance(self.lookahead, int):
+            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
+        if self.select is None:
+            object.__setattr__(self, "select", DEFAULT_SELECT.get(str(self.head_form), "best"))
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
         if self.runs is not None:
@@ -169,6 +180,8 @@ class TrainConfig:
             raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
+        if self.head_form not in HEAD_FORMS:
+            raise ConfigError(f"train.head_form must be one of {HEAD_FORMS}, got {self.head_form!r}")
         self.head()  # the head's own rules (form, lookahead, projection size)
         self._check_bootstrap()
         if not isinstance(self.mirror, bool):
