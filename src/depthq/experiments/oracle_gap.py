@@ -23,10 +23,10 @@ from typing import Any
 from depthq.cli import main as depthq
 from depthq.configio import read_json, write_json
 from depthq.evaluate.oracle import Oracle
+from depthq.experiments.cells import mean_interval
 from depthq.report.presets import get_preset
 from depthq.report.probe import measure_agreement
 from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget
-from depthq.report.tables import interval
 
 
 @dataclass(frozen=True)
@@ -141,8 +141,6 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
             if not rows:
                 continue
             d2c = [s["distance_to_collision_mean"] for s, _ in rows]
-            bounds = interval(d2c)
-            spread = f" [{bounds[0]:.2f}, {bounds[1]:.2f}]" if bounds else ""
             agreed = [a for _, a in rows if a]
 
             def mean(key: str, fmt: str, agreed: list = agreed) -> str:
@@ -155,7 +153,7 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
                 else "–"
             )
             ends = sum(s["reached_end"] for s, _ in rows) / len(rows)
-            cells = [candidate.name, size, len(rows), f"{sum(d2c) / len(d2c):.2f}{spread}", f"{ends:.1f}",
+            cells = [candidate.name, size, len(rows), mean_interval(d2c, ".2f"), f"{ends:.1f}",
                      mean("agreement_decisive", ".0%"), mean("agreement_before_collision", ".0%"), pillars,
                      mean("same_decision_new_noise", ".0%")]
             lines.append("| " + " | ".join(map(str, cells)) + " |")

@@ -280,7 +280,7 @@ class CanyonFamily:
     time_limit_s: float = 45.0
 
 
-def _time_to_end(config: CanyonConfig, speed: float = 0.5, slack: float = 1.5) -> float:
+def time_to_end(config: CanyonConfig, speed: float = 0.5, slack: float = 1.5) -> float:
     """An evaluation time limit from a canyon's length: `slack` × the mean centre line at `speed`
     (WorldConfig.speed), so a policy that weaves still reaches the end."""
     return float(math.ceil(slack * config.n_segments * sum(config.segment_length) / 2 / speed))
@@ -299,7 +299,7 @@ FAMILIES: dict[str, CanyonFamily] = {
     PAPER: CanyonFamily(PAPER, 0, CanyonConfig()),
     # narrower, curvier, shorter, pillars in the way, randomised look (docs/hard_canyons.md)
     "hard": CanyonFamily(
-        "hard", 1, HARD_CANYON, appearance="randomized", goal="end", time_limit_s=_time_to_end(HARD_CANYON)
+        "hard", 1, HARD_CANYON, appearance="randomized", goal="end", time_limit_s=time_to_end(HARD_CANYON)
     ),
 }
 
