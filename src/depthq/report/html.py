@@ -53,7 +53,7 @@ DEVIATIONS = [
     (
         "The raw action appended to the 256-d MobileNet feature",
         "the action ×10 appended to the 1280-d feature (TrainConfig.action_scale)",
-        "with ×1 the head hardly used the action (docs/action_fidelity.py on validation frames); "
+        "with ×1 the head hardly used the action (depthq.experiments.action_fidelity on validation frames); "
         "chosen on validation data and val canyons",
     ),
     (
