@@ -114,7 +114,7 @@ def measure(canyon: CanyonConfig, canyons: str = CANYONS, ou_runs: int = OU_RUNS
     return heuristic_row(canyon, canyons), ou_row(canyon, ou_runs)
 
 
-def main(
+def calibrate(
     out: Path,
     candidates: dict[str, CanyonConfig] = CANDIDATES,
     canyons: str = CANYONS,
@@ -153,10 +153,14 @@ def picture(runs: list[dict], canyon: CanyonConfig, path: Path) -> None:
     fig.savefig(path, dpi=80)
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m depthq.experiments.hard_canyons",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("out", type=Path, nargs="?", default=Path("docs"),
                         help="the folder for hard_canyons.png (default: docs, run from the repository root)")
-    main(parser.parse_args().out)
-    sys.exit(0)
+    calibrate(parser.parse_args(argv).out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

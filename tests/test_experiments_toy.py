@@ -1,0 +1,229 @@
+"""The experiments behind the docs' measurements (ablation, action fidelity, hard canyons, the
+investigation, the lookahead table, precision, success vs runs, val choices) at toy size: real
+collections in the hard family, real trainings and evaluations, a copy of the suite's smoke run."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import pkgutil
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from depthq import experiments
+from depthq.data.collect import CollectConfig, collect, exploration_env
+from depthq.data.manifest import Dataset
+from depthq.evaluate.evaluate import EvalConfig
+from depthq.evaluate.oracle import OracleWorld, env_config
+from depthq.experiments import (
+    ablation,
+    action_fidelity,
+    hard_canyons,
+    investigation,
+    lookahead,
+    precision,
+    success_vs_runs,
+    truth,
+    val_choices,
+)
+from depthq.sim.canyon import HARD_CANYON
+from depthq.sim.sensors import depth_bins, finish_scan
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+
+TOY_TRAINING = {"epochs": 2, "train_batches": 5, "val_batches": 2}
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_python(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert not sorted(DOCS.rglob("*.py"))
+    names = [m.name for m in pkgutil.iter_modules(experiments.__path__)]
+    assert {"ablation", "action_fidelity", "hard_canyons", "investigation", "lookahead", "precision",
+            "success_vs_runs", "val_choices"} <= set(names)
+    for name in names:
+        module = importlib.import_module(f"depthq.experiments.{name}")
+        if not hasattr(module, "main"):  # a shared helper (cells, truth)
+            continue
+        with pytest.raises(SystemExit) as exit_:
+            module.main(["--help"])
+        assert exit_.value.code == 0
+        assert capsys.readouterr().out.startswith(f"usage: python -m depthq.experiments.{name}")
+
+
+@pytest.fixture(scope="module")
+def hard_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A toy dataset of the hard family: 4 kept training runs and 3 validation runs of ≤ 40 steps."""
+    root = tmp_path_factory.mktemp("hard") / "data"
+    config = CollectConfig(runs=4, val_runs=3, max_steps=40, env=exploration_env(family="hard"))
+    collect(root, config, seed=0, workers=1, progress=False)
+    return root
+
+
+@pytest.fixture(scope="module")
+def hard_checkpoints(hard_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """Two Depth-Q-Nets on `hard_data`: the default label horizon (5) and horizon 1."""
+    out = tmp_path_factory.mktemp("hard_models")
+    return tuple(  # type: ignore[return-value]
+        train(TrainConfig(model="depth", data=str(hard_data), horizon=h, **TOY_TRAINING), out / f"h{h}",
+              progress=False)
+        for h in (5, 1)
+    )
+
+
+def _current_bins(sim: OracleWorld, pose: np.ndarray) -> np.ndarray:
+    sim.env.world.place(*pose)
+    return depth_bins(finish_scan(sim.env.world.raycast(), sim.exact, sim.rng), sim.env.config.bins)
+
+
+@pytest.mark.slow
+def test_truth_is_simulated_in_the_datasets_own_canyon_family(hard_data: Path) -> None:
+    dataset = Dataset.open(hard_data)
+    assert truth.family(dataset) == "hard" and truth.canyon(dataset, "val", 2) == "hard/val:2"
+    run = dataset.read_run(dataset.entry("val", 0), images=False)
+    own = truth.dataset_world(dataset)
+    paper = OracleWorld(env_config(["val:0"], float(dataset.config["env"]["world"]["decision_hz"])))
+    try:
+        own.load("hard/val:0")
+        paper.load("val:0")
+        recorded = np.nan_to_num(run.bins[:10], nan=2.0)
+        seen = {name: np.nan_to_num([_current_bins(sim, p.astype(float)) for p in run.poses[:10]], nan=2.0)
+                for name, sim in (("own", own), ("paper", paper))}
+    finally:
+        own.close()
+        paper.close()
+    assert np.abs(seen["own"] - recorded).mean() < 0.03  # the recorded scans, up to the LiDAR's noise
+    assert np.abs(seen["paper"] - recorded).mean() > 0.1  # the paper's canyon of that name is elsewhere
+
+
+@pytest.mark.slow
+def test_action_fidelity_shares_the_truth_between_label_horizons(
+    hard_checkpoints: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    h5, h1 = hard_checkpoints
+    cache: dict = {}
+    first = action_fidelity.fidelity(h5, cache)
+    frames = len(cache)
+    second = action_fidelity.fidelity(h1, cache)  # more samples (those before each run's end): no crash
+    assert len(cache) > frames
+    for result in (first, second):
+        assert len(result["l1_left_straight_right"]) == 3
+        assert all(math.isfinite(v) and v >= 0 for v in result["l1_left_straight_right"])
+        assert result["spread_true"] >= 0 and 0 <= result["agree"] <= 1 and result["decisive_frames"] > 0
+    assert second["decisive_frames"] >= first["decisive_frames"]
+    assert action_fidelity.main([str(h5), str(h1)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines] == ["h5", "h1"] and f"'agree': {second['agree']}" in lines[1]
+
+
+@pytest.mark.slow
+def test_the_investigation_checks_a_hard_dataset(hard_data: Path) -> None:
+    dataset = Dataset.open(hard_data)
+    assert set(investigation.sign_check(dataset)) == {1, -1}
+    distances = investigation.oracle_distances(("val:1000",))
+    assert len(distances) == 1 and distances[0] > 0
+    assert 0 < investigation.constant_baseline(dataset) < 2
+    effect, slope = investigation.action_effects(dataset)
+    assert effect.shape == slope.shape == (26,) and np.isfinite(slope).all()
+    assert np.isfinite(effect).any() and np.nanmax(np.abs(effect)) > 0  # turning changes what is seen
+
+
+@pytest.mark.slow
+def test_precision_compares_bf16_decisions_with_the_policys_own(hard_checkpoints: tuple[Path, Path]) -> None:
+    result = precision.measure(hard_checkpoints[0], frames=8)  # asserts fp32 decides as the policy does
+    assert result["frames"] == 8 and 0 <= result["changed"] <= 8
+    assert 0 < result["fp32_ms"] < 1e4 and 0 < result["bf16_ms"] < 1e4
+
+
+@pytest.mark.slow
+def test_val_choices_trains_drives_tabulates_and_resumes(hard_data: Path, tmp_path: Path) -> None:
+    variants = {"coll_toy": {"model": "coll", **TOY_TRAINING}}
+    config = EvalConfig(canyons=("hard/val:1000",), time_limit_s=5.0)
+    row = val_choices.run_variant(hard_data, tmp_path, "coll_toy", variants, config)
+    summary = json.loads((tmp_path / "eval" / "coll_toy" / "summary.json").read_text())["summary"]
+    assert row["successes"] == summary["successes"] and sum(row["ends"].values()) == 1
+    assert row["val_loss"] == json.loads((tmp_path / "coll_toy" / "best.json").read_text())["val_loss"]
+    stamp = (tmp_path / "eval" / "coll_toy" / "summary.json").stat().st_mtime_ns
+    assert val_choices.run_variant(hard_data, tmp_path, "coll_toy", variants, config) == row  # resumed
+    assert (tmp_path / "eval" / "coll_toy" / "summary.json").stat().st_mtime_ns == stamp
+    lines = val_choices.table([row]).splitlines()
+    assert len(lines) == 3 and lines[2].startswith(f"| coll_toy | {row['val_loss']:.4f} | ")
+
+
+@pytest.mark.slow
+def test_hard_canyons_measures_a_candidate_and_draws_the_chosen_one(tmp_path: Path) -> None:
+    short = replace(HARD_CANYON, n_segments=6)
+    text = hard_canyons.calibrate(tmp_path, {"short": short}, "hard/val:1000", ou_runs=2, chosen=short)
+    lines = text.splitlines()
+    assert len(lines) == 3 and lines[2].startswith("| short (chosen) | ")
+    assert lines[2].split(" | ")[1] in ("0/1", "1/1")
+    assert (tmp_path / "hard_canyons.png").stat().st_size > 1000
+
+
+def test_success_vs_runs_draws_the_per_seed_table(tmp_path: Path) -> None:
+    (tmp_path / "results.md").write_text(
+        "Per seed (successes / mean distance in m):\n\n"
+        "| runs | DQN: successes/m per seed | CQN: successes/m per seed | paper DQN, CQN (mean) |\n"
+        "|---|---|---|---|\n"
+        "| 50 | 13/15.8, 10/13.1 | 0/3.8, 2/7.4 | 0.0/1.68, 0.0/1.07 |\n"
+        "| 200 | 17/18.3, 13/15.6 | 19/20.5, 20/21.3 | 8.0/12.19, 0.0/2.69 |\n\n"
+        "Per seed (successes / mean distance in m):\n\n| 900 | 1/1.0 | 1/1.0 | 1.0/1.0, 1.0/1.0 |\n"
+    )
+    rows = success_vs_runs.per_seed_table((tmp_path / "results.md").read_text())
+    assert rows == [(50, [13, 10], [0, 2], 0.0, 0.0), (200, [17, 13], [19, 20], 8.0, 0.0)]
+    assert success_vs_runs.main(["--docs", str(tmp_path)]) == 0
+    assert (tmp_path / "success_vs_runs.png").stat().st_size > 1000
+
+
+# The smoke run's ladder: its defaults (reused from the copy) and Depth-Q-Net with a lookahead of 3.
+TOY_LADDER = ablation.Ladder(
+    "paper", "smoke", "eval:0-1", (ablation.Rung("ours"),),
+    (ablation.Rung("lookahead 3", ("lookahead=3",), nets=("depth",), seeds=(0,)),), sizes=(6,), seeds=(0,),
+)
+
+
+@pytest.fixture(scope="module")
+def ladder(smoke: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The toy ladder climbed in a copy of the smoke run (its 4 Hz sweep folder)."""
+    out = tmp_path_factory.mktemp("ladder")
+    shutil.copytree(smoke, out / "4hz")
+    assert ablation.run(TOY_LADDER, out) == 0
+    return out
+
+
+@pytest.mark.slow
+def test_the_ablation_ladder_runs_its_rungs_and_tabulates_them(ladder: Path) -> None:
+    text = (ladder / "ablation.md").read_text()
+    assert "`python -m depthq.experiments.ablation run paper OUT`" in text
+    rows = {line.split(" | ")[0] + " | " + line.split(" | ")[1]: line for line in text.splitlines()
+            if line.startswith("| ours") or line.startswith("| lookahead 3")}
+    assert set(rows) == {"| ours | Depth-Q-Net", "| ours | Coll-Q-Net", "| lookahead 3 | Depth-Q-Net"}
+    evaluation = ladder / "4hz" / "eval" / "depth_n6_s0_lookahead3" / "summary.json"
+    s = json.loads(evaluation.read_text())["summary"]
+    assert f"| 6 | {s['successes']:.1f} | {s['distance_mean']:.2f} | " in rows["| lookahead 3 | Depth-Q-Net"]
+    assert "(1 of 2 seeds)" in rows["| ours | Depth-Q-Net"]  # the rung's seeds are 0 and 1
+    for figure in ("ablation.png", "horizon.png"):
+        assert (ladder / figure).stat().st_size > 1000
+    stamp = evaluation.stat().st_mtime_ns
+    assert ablation.run(TOY_LADDER, ladder) == 0  # resumed: nothing trained or driven again
+    assert evaluation.stat().st_mtime_ns == stamp
+
+
+@pytest.mark.slow
+def test_the_lookahead_table_pairs_the_two_depth_q_nets_by_seed(ladder: Path) -> None:
+    folder = ladder / "4hz"
+    lines = lookahead.table((folder, folder), sizes=(6,), seeds=(0,)).splitlines()
+    assert [line.split(" | ")[0] for line in lines[2:]] == [
+        "| Coll-Q-Net", "| Depth-Q-Net, one step", "| Depth-Q-Net, lookahead 3",
+        "| lookahead 3 − one step, paired by seed"]
+    one, look = (json.loads((folder / "eval" / name / "summary.json").read_text())["summary"]
+                 for name in ("depth_n6_s0", "depth_n6_s0_lookahead3"))
+    difference = look["distance_to_collision_mean"] - one["distance_to_collision_mean"]
+    assert lines[5].split(" | ")[3] == f"{difference:.2f}"
+    assert lines[4].endswith(f" | {look['distance_to_collision_mean']:.2f} |")
