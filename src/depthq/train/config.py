@@ -103,10 +103,10 @@ class TrainConfig:
     # Width of the head's hidden layer (the paper's 4096); its first layer is most of a head step's
     # arithmetic.
     hidden: int = field(default=4096, metadata=OMIT_DEFAULT)
-    # The head's form: "depth_first" (the current bins read from the feature, then the next bins from
-    # them and the action), "concat" (the action appended to the feature: the paper's head) or
-    # "per_action" (bins per anchor action). None: a one-step Depth-Q-Net's default, "depth_first"; a
-    # Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
+    # The head's form: depth_first (the current bins read from the feature, then the next bins from
+    # them and the action), concat (the action appended to the feature: the paper's head) or
+    # per_action (bins per anchor action); none: depth_first for a one-step Depth-Q-Net, else concat.
+    # A Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
     head_form: str | None = None
     # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
     # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
@@ -123,10 +123,10 @@ class TrainConfig:
     every_run_end: bool = True
     action_clip: float = 1.0
     action_lag: int = 0
-    # The weights a policy of this checkpoint uses unless told (`--which`): "best" (lowest validation
-    # loss) or "final" (after the last epoch, as the original evaluated them). None: the head form's
-    # choice, made on `val` canyons: "final" for "depth_first", "best" for the others
-    # (docs/oracle_gap.md#depth-first). Training is the same either way.
+    # The weights this checkpoint's policy uses unless told (--which): best (lowest validation loss)
+    # or final (after the last epoch, as the original evaluated them); none: final for a depth_first
+    # head, else best. The head form's choice was made on `val` canyons
+    # (docs/design.md#weights). Training is the same either way.
     select: str | None = None
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--which epoch:40`), so that one
     # long training also gives the policies of shorter ones.
