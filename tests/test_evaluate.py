@@ -7,13 +7,14 @@ import pytest
 from conftest import assert_video
 
 from depthq.cli import main
+from depthq.control import action_selection
 from depthq.control.action_selection import depth_scores, select_coll_action, select_depth_action
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.metrics import distance_from_spawn, imitation_loss, path_length
 from depthq.sim.world import DEFAULT_DECISION_HZ
 
-ACTIONS = np.array([-1.0, 0.0, 1.0])
+ACTIONS = np.array(action_selection.ACTIONS)  # the candidates, as the selection rules take them
 
 
 def test_depth_selection_maximises_the_nearest_predicted_obstacle():
