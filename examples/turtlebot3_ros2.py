@@ -14,8 +14,8 @@ from geometry_msgs.msg import Twist
 from rclpy.node import Node
 from sensor_msgs.msg import CompressedImage
 
-from depthq.control.onnx_policy import OnnxPolicy
 from depthq.deploy.robot import decode_frame, twist_for_frame
+from depthq.policies.onnx import OnnxPolicy
 
 
 class DepthqDriver(Node):

@@ -86,14 +86,14 @@ def test_a_depth_first_training_fits_both_parts_and_drives(small_dataset: Path, 
     rows = [line.split(",") for line in (folder / "metrics.csv").read_text().splitlines()[1:]]
     train_losses = [float(r[1]) for r in rows]
     assert train_losses[-1] < train_losses[0]  # perception and dynamics both learn
-    from depthq.control.qnet_policy import QNetPolicy
+    from depthq.policies.qnet import QNetPolicy
 
     policy = QNetPolicy.from_checkpoint(folder)
     frame = np.random.default_rng(0).integers(0, 256, (308, 410, 3), np.uint8)
     assert policy.act({"image": frame}) in (-1.0, 0.0, 1.0) and policy.last_values.shape == (3, 26)
     pytest.importorskip("onnxruntime")
-    from depthq.control.onnx_policy import OnnxPolicy
     from depthq.deploy.onnx_export import export_onnx
+    from depthq.policies.onnx import OnnxPolicy
 
     exported = OnnxPolicy(export_onnx(folder, tmp_path / "onnx"))  # the camera alone drives it
     assert exported.act({"image": frame}) == policy.act({"image": frame})

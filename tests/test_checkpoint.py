@@ -15,11 +15,11 @@ from safetensors.torch import load_file
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.evaluate import EvalConfig, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, load_qnet, read_config
+from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train

@@ -15,14 +15,14 @@ from conftest import assert_video
 from PIL import Image
 
 from depthq.cli import main
-from depthq.control.onnx_policy import OnnxPolicy
-from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.manifest import Dataset
 from depthq.deploy.onnx_export import FrameResize, export_onnx
 from depthq.deploy.robot import LINEAR_SPEED, decode_frame, twist_for_frame
 from depthq.errors import ConfigError, DataError
 from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.trunk import preprocess
+from depthq.policies.onnx import OnnxPolicy
+from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 

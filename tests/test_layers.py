@@ -1,10 +1,13 @@
-"""The package's layers hold: no module imports one of a later layer (the order is `depthq`'s docstring),
-and no two modules import each other at import time. Read from the source with `ast`, imports inside
-functions included: a lazy import is a dependency too."""
+"""The package's layers hold, read from the source with `ast` (imports inside functions included: a lazy
+import is a dependency too). The layers are the list in `depthq`'s docstring, read from it here so
+the two cannot drift; each name there is a folder (or a base module), so the folders show the layers:
+every folder is in the list once, no folder imports a later one or a sibling unit, no folders import
+each other round a loop, and no two modules import each other at import time."""
 
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,25 +16,18 @@ import depthq
 
 SRC = Path(depthq.__file__).parent
 
-# Earlier layers first. A module may import modules of its own unit and of earlier layers; two units
-# in one layer are independent (neither imports the other). The longest matching prefix decides, so
-# control's learned policies sit above `nets`, the rest of control below `data` (collection drives the
-# exploration policy). Keep in step with the order in `depthq`'s docstring.
-LAYERS: list[dict[str, tuple[str, ...]]] = [
-    # imports no layer
-    {"base": ("depthq.errors", "depthq.configio", "depthq.parallel", "depthq.flags", "depthq.host")},
-    {"sim": ("depthq.sim",)},
-    {"control": ("depthq.control",)},  # the Policy interface, exploration (OU), expert (heuristic)
-    {"data": ("depthq.data",)},
-    {"nets": ("depthq.nets",)},
-    {"policies": ("depthq.control.qnet_policy", "depthq.control.onnx_policy", "depthq.control.registry")},
-    {"train": ("depthq.train",)},
-    {"evaluate": ("depthq.evaluate",), "deploy": ("depthq.deploy",)},
-    {"report": ("depthq.report",), "bench": ("depthq.bench",)},
-    {"scripts": ("depthq.scripts",)},
-    {"cli": ("depthq.cli",)},
-    {"experiments": ("depthq.experiments",)},  # measurements behind the docs, driving the verbs
-]
+
+def _declared_layers() -> list[list[tuple[str, ...]]]:
+    """The layers of `depthq`'s docstring, earliest first: each a list of units (`|` apart), each unit
+    the folders or base modules it joins (`,`). The list is the paragraph after the one that starts
+    "Layers,"; a line's names end where its description starts (two spaces or more)."""
+    paragraphs = (depthq.__doc__ or "").split("\n\n")
+    block = next(paragraphs[k + 1] for k, text in enumerate(paragraphs) if text.startswith("Layers,"))
+    names = " ".join(re.split(r"\s{2,}", line.strip())[0] for line in block.splitlines() if line[4:5] != " ")
+    return [[tuple(n.strip() for n in unit.split(",")) for unit in layer.split("|")] for layer in names.split("←")]
+
+
+LAYERS = _declared_layers()
 # The package root runs before any module (it sets MUJOCO_GL) and may import only `depthq.sim`'s
 # `__init__`, which registers the env by name; any module may import the root (for `__version__`).
 ROOT_MAY_IMPORT = {"depthq.sim"}
@@ -79,45 +75,30 @@ def _imports(module: str, top_level_only: bool = False) -> set[str]:
     return {t for n in nodes for t in _targets(n, module)}
 
 
-def _unit(module: str) -> tuple[int, str]:
-    """(layer, unit) of a module: the unit with the longest prefix matching it."""
-    best = (-1, "", "")
-    for layer, units in enumerate(LAYERS):
-        for unit, prefixes in units.items():
-            for prefix in prefixes:
-                if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > len(best[2]):
-                    best = (layer, unit, prefix)
-    assert best[0] >= 0, f"{module} is in no layer: add it to LAYERS here and to depthq's docstring"
-    return best[0], best[1]
+def _folder(module: str) -> str:
+    """The folder (or base module) a module is in: `depthq.nets.heads` → nets."""
+    return module.split(".")[1]
 
 
-def test_every_module_is_in_a_layer() -> None:
-    for module in MODULES:
-        if module != "depthq":
-            _unit(module)
+FOLDERS = sorted({_folder(m) for m in MODULES if m != "depthq"})
+# folder → (layer, unit): its position in the docstring's list
+PLACE = {name: (k, ", ".join(unit)) for k, layer in enumerate(LAYERS) for unit in layer for name in unit}
 
 
-def test_no_module_imports_a_later_layer_or_a_sibling() -> None:
-    bad = []
+def _folder_imports() -> dict[str, dict[str, list[str]]]:
+    """folder → {folder it imports: the module imports that make the edge}, self-imports left out."""
+    graph: dict[str, dict[str, list[str]]] = {f: {} for f in FOLDERS}
     for module in MODULES:
         if module == "depthq":
             continue
-        layer, unit = _unit(module)
-        for target in _imports(module) - {"depthq"}:
-            target_layer, target_unit = _unit(target)
-            if target_unit != unit and target_layer >= layer:
-                bad.append(f"{module} ({unit}) imports {target} ({target_unit})")
-    assert not bad, "layer order broken:\n" + "\n".join(sorted(bad))
+        for target in sorted(_imports(module) - {"depthq"}):
+            if _folder(target) != _folder(module):
+                graph[_folder(module)].setdefault(_folder(target), []).append(f"{module} → {target}")
+    return graph
 
 
-def test_the_root_imports_only_the_env_registration() -> None:
-    assert _imports("depthq") <= ROOT_MAY_IMPORT
-    assert _imports("depthq.sim") == set()  # so `import depthq` costs gymnasium, not mujoco or torch
-
-
-def test_no_import_cycle_at_import_time() -> None:
-    """Tarjan's strongly connected components over module-level imports: each must be one module."""
-    graph = {m: _imports(m, top_level_only=True) & MODULES.keys() for m in MODULES}
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Tarjan's strongly connected components of more than one node (or a node that imports itself)."""
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -126,7 +107,7 @@ def test_no_import_cycle_at_import_time() -> None:
     def visit(v: str) -> None:
         index[v] = low[v] = len(index)
         stack.append(v)
-        for w in graph[v]:
+        for w in sorted(graph[v]):
             if w not in index:
                 visit(w)
                 low[v] = min(low[v], low[w])
@@ -142,10 +123,45 @@ def test_no_import_cycle_at_import_time() -> None:
             if len(component) > 1 or v in graph[v]:
                 cycles.append(sorted(component))
 
-    for v in graph:
+    for v in sorted(graph):
         if v not in index:
             visit(v)
-    assert not cycles, f"modules that import each other: {cycles}"
+    return cycles
+
+
+def test_the_docstring_lists_every_folder_once() -> None:
+    names = [name for layer in LAYERS for unit in layer for name in unit]
+    assert len(names) == len(set(names)), f"named twice in depthq's docstring: {names}"
+    assert set(names) == set(FOLDERS), (
+        f"folders in no layer: {sorted(set(FOLDERS) - set(names))}; "
+        f"layers that are no folder: {sorted(set(names) - set(FOLDERS))}"
+    )
+
+
+def test_no_folder_imports_a_later_layer_or_a_sibling() -> None:
+    bad = []
+    for folder, targets in _folder_imports().items():
+        layer, unit = PLACE[folder]
+        for target, how in targets.items():
+            target_layer, target_unit = PLACE[target]
+            if target_unit != unit and target_layer >= layer:
+                bad.append(f"{folder} imports {target}, a later layer or a sibling: {'; '.join(how)}")
+    assert not bad, "layer order broken:\n" + "\n".join(sorted(bad))
+
+
+def test_no_folder_loop() -> None:
+    graph = {folder: set(targets) for folder, targets in _folder_imports().items()}
+    assert not _cycles(graph), f"folders that import each other round a loop: {_cycles(graph)}"
+
+
+def test_the_root_imports_only_the_env_registration() -> None:
+    assert _imports("depthq") <= ROOT_MAY_IMPORT
+    assert _imports("depthq.sim") == set()  # so `import depthq` costs gymnasium, not mujoco or torch
+
+
+def test_no_import_cycle_at_import_time() -> None:
+    graph = {m: _imports(m, top_level_only=True) & MODULES.keys() for m in MODULES}
+    assert not _cycles(graph), f"modules that import each other: {_cycles(graph)}"
 
 
 def test_the_command_starts_without_mujoco_or_the_extras() -> None:

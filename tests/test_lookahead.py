@@ -243,10 +243,10 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 
 @pytest.mark.slow
 def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: Path, tmp_path: Path) -> None:
-    from depthq.control.qnet_policy import QNetPolicy
-    from depthq.control.registry import make_policy
     from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
     from depthq.nets.checkpoint import load_qnet
+    from depthq.policies.qnet import QNetPolicy
+    from depthq.policies.registry import make_policy
     from depthq.train.trainer import train
 
     fast = {"epochs": 2, "train_batches": 4, "val_batches": 1, "batch_size": 16}
@@ -287,8 +287,8 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     assert json.loads((one / "last.json").read_text())["epoch"] == 2
 
     pytest.importorskip("onnxruntime")
-    from depthq.control.onnx_policy import OnnxPolicy
     from depthq.deploy.onnx_export import export_onnx
+    from depthq.policies.onnx import OnnxPolicy
 
     path = export_onnx(out, tmp_path / "onnx")
     onnx_policy = OnnxPolicy(path)

@@ -18,7 +18,6 @@ from test_lookahead import _one_step_head_by_hand
 
 from depthq.cli import main
 from depthq.configio import from_dict, to_dict
-from depthq.control.qnet_policy import BATCH_FRAMES, QNetPolicy
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
@@ -26,6 +25,7 @@ from depthq.flags import config_from_args
 from depthq.nets.checkpoint import load_qnet
 from depthq.nets.heads import HeadConfig, QNet, build_head, pca_projection
 from depthq.nets.optim import make_optimizer
+from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.trainer import train
@@ -218,8 +218,8 @@ def test_projected_heads_decide_in_batches_as_alone(projected: Path, small_datas
 def test_a_projected_net_exports_as_torch(projected: Path, small_dataset: Path, tmp_path: Path) -> None:
     for module in ("onnx", "onnxscript", "onnxruntime"):
         pytest.importorskip(module)
-    from depthq.control.onnx_policy import OnnxPolicy
     from depthq.deploy.onnx_export import export_onnx
+    from depthq.policies.onnx import OnnxPolicy
 
     onnx_policy = OnnxPolicy(export_onnx(projected, tmp_path / "onnx"))
     policy = QNetPolicy.from_checkpoint(projected)

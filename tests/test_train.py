@@ -14,7 +14,6 @@ from safetensors.torch import load, load_file, save
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
 from depthq.data.views import DepthView
@@ -23,6 +22,7 @@ from depthq.flags import config_from_args
 from depthq.nets.checkpoint import load_qnet
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.policies.qnet import QNetPolicy
 from depthq.scripts.train import add_arguments
 from depthq.train.checkpoint import build_qnet
 from depthq.train.config import TrainConfig

@@ -1,6 +1,8 @@
 """depthq: learn monocular collision avoidance from future depth (Depth-Q-Net) or collisions (Coll-Q-Net).
 
-Layers, each importing only from those before it (tests/test_layers.py checks the source):
+Layers, each importing only from those before it; every name is a folder (a package) or, in the base
+layer, a module, so the folders show the layers (tests/test_layers.py reads this list and checks the
+source against it, folders and files):
 
     errors, configio, parallel, flags,      base: no layer below
     host
@@ -9,16 +11,17 @@ Layers, each importing only from those before it (tests/test_layers.py checks th
                                             action selection rules (collection drives them)
     ← data                                  collection and the on-disk datasets, ROS 2 bags
     ← nets                                  trunks, heads, losses, optimizer, checkpoints read back
-    ← control.qnet_policy, .onnx_policy,    the learned policies (torch or onnxruntime) and
-      .registry                             `make_policy`, which builds any policy from its name
-    ← train
+    ← policies                              the learned policies (torch or onnxruntime) and
+                                            `make_policy`, which builds any policy from its spec
+    ← train                                 the feature cache, samples, the trainer, checkpoints written
     ← evaluate | deploy                     online evaluation | ONNX export and the robot step
     ← report | bench                        the reproduction pipeline | `depthq bench` figures
     ← scripts ← cli                         one module per verb, the `depthq` command
     ← experiments                           the measurements behind the docs, run as modules
 
-Units on one line (`|`) do not import each other. This root module runs first and imports only
-`depthq.sim`'s `__init__` (the env's name); any module may import it for `__version__`.
+Names joined by `,` form one unit, whose modules may import each other; units on one line (`|`) do
+not import each other. This root module runs first and imports only `depthq.sim`'s `__init__` (the
+env's name); any module may import it for `__version__`.
 """
 
 import os

@@ -10,12 +10,12 @@ import torch
 
 from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
-from depthq.control.qnet_policy import QNetPolicy
-from depthq.control.registry import make_policy
 from depthq.nets.device import resolve_device
 from depthq.nets.heads import HeadConfig, QNet, build_head
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.parallel import cores
+from depthq.policies.qnet import QNetPolicy
+from depthq.policies.registry import make_policy
 from depthq.sim.env import CanyonEnv
 
 BATCH = 20  # the evaluation canyons: one lock-step step of a single worker

@@ -1,5 +1,5 @@
-"""What the two learned policies share (a checkpoint's `QNetPolicy`, an exported graph's
-`OnnxPolicy`): the candidates a frame's values are predicted for, the rule that picks one of them
+"""What the two learned policies of `depthq.policies` share (a checkpoint's `QNetPolicy`, an exported
+graph's `OnnxPolicy`): the candidates a frame's values are predicted for, the rule that picks one of them
 (docs/design.md#action-selection, #lookahead-selection), and what Fig. 4 is shown of the values.
 A subclass only predicts: `values(image)` for one frame.
 """

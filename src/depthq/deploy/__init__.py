@@ -1,2 +1,2 @@
 """Taking a trained policy out of depthq: `onnx_export` writes a Q-net as one ONNX graph that a robot
-runs with onnxruntime and numpy alone (`depthq.control.onnx_policy` drives it)."""
+runs with onnxruntime and numpy alone (`depthq.policies.onnx` drives it)."""

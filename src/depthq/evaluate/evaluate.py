@@ -23,7 +23,6 @@ from tqdm import tqdm
 from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
 from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
-from depthq.control.registry import make_policy
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4, plot_trajectories
 from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
@@ -34,6 +33,7 @@ from depthq.host import host_fingerprint
 from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
+from depthq.policies.registry import make_policy
 from depthq.sim.canyon import (
     FAMILIES,
     FRESH,

@@ -174,7 +174,7 @@ def drive_oracle(oracle: Oracle, canyons: list[str], decision_hz: float) -> dict
 
 def _checkpoint_policy(summary: dict[str, Any]) -> Any:
     """The evaluated checkpoint's policy with the evaluation's weights and selection rule."""
-    from depthq.control.qnet_policy import QNetPolicy
+    from depthq.policies.qnet import QNetPolicy
 
     described, config = summary["policy"], summary["config"]
     if not described.get("checkpoint"):

@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.control.qnet_policy import QNetPolicy
 from depthq.data.manifest import Dataset
 from depthq.nets.checkpoint import dataset_record, read_config
 from depthq.nets.heads import probability
+from depthq.policies.qnet import QNetPolicy
 
 FRAMES = 1000
 

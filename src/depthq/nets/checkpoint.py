@@ -2,8 +2,8 @@
 data), the weight files and their digests, the format's version, and reading a network back.
 
 This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
-`depthq.train.checkpoint`) and `depthq.control` (whose policies read them), so a policy needs
-nothing from training, nor the dataset: a checkpoint folder describes itself.
+`depthq.train.checkpoint`) and `depthq.policies` (which read them), so a policy needs nothing from
+training, nor the dataset: a checkpoint folder describes itself.
 
 config.json (format version 3):
 

@@ -33,8 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch: when this verb runs, not at the CLI's startup
-    from depthq.control.registry import make_policy
     from depthq.evaluate.evaluate import data_rate
+    from depthq.policies.registry import make_policy
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
     from depthq.sim.world import WorldConfig, world_for
 

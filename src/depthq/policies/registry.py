@@ -7,11 +7,11 @@ from pathlib import Path
 
 from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
-from depthq.control.onnx_policy import OnnxPolicy
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import Policy
-from depthq.control.qnet_policy import QNetPolicy
 from depthq.errors import ConfigError
+from depthq.policies.onnx import OnnxPolicy
+from depthq.policies.qnet import QNetPolicy
 
 BUILTIN = ("heuristic", "ou")
 
