@@ -18,7 +18,8 @@ from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
 # The original's rates: Depth-Q-Net 0.1, Coll-Q-Net 0.01 (docs/design.md#training). Coll-Q-Net's 0.01
 # under-trains it in our 40-epoch budget (the paper ran up to 1000): on 500 runs of the 4 Hz paper
 # dataset, seed 0, its validation loss (BCE over all validation samples) is 0.145 at 0.01 and 0.112
-# at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1 (docs/val_choices.py).
+# at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1
+# (`python -m depthq.experiments.val_choices`).
 # Hence 0.1 for both.
 DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is
@@ -63,28 +64,33 @@ class TrainConfig:
 
     model: str
     data: str
+    # The first n usable training runs (the paper's nested subsets); none: all of them.
     runs: int | None = None
+    # Seeds the head's initialisation and the batches drawn (the same seed, the same weights).
     seed: int = 0
     epochs: int = DEFAULT_EPOCHS
+    # Training batches per epoch.
     train_batches: int = 100
+    # Validation batches per epoch (the best weights are those of the lowest validation loss).
     val_batches: int = 10
+    # Samples per batch.
     batch_size: int = 64
+    # Adadelta's learning rate; none: the model's default, 0.1 for both (docs/deviations.md#coll-lr).
     lr: float | None = None
+    # Adadelta's decay of its running averages (the original's).
     rho: float = RHO
+    # Adadelta's epsilon (the original's).
     eps: float = EPS
+    # L2 weight decay of the head's weights (the original's).
     weight_decay: float = WEIGHT_DECAY
     trunk: str = DEFAULT_TRUNK  # see depthq.nets.trunk
-    # The paper drops out 0.5 of the feature. On the frozen 1280-d EfficientNet-Lite0 feature that
-    # makes eval-mode predictions far off the train-mode ones (L1 0.61 vs 0.26 m on the training
-    # data itself, 200 runs): validation L1 after 1000 steps is 0.197 (p=0), 0.219 (0.1), 0.296
-    # (0.25), 0.61 (0.5). Hence 0 by default; set 0.5 for the paper's value.
+    # Dropout on the feature; the paper's 0.5 blurs a frozen feature's predictions
+    # (docs/deviations.md#dropout).
     dropout: float = 0.0
-    # The action is 1 of 1281 head inputs here (1 of 257 in the paper's MobileNet-0.25 head), and the
-    # frozen feature's norm is ≈ 21 against the action's ≤ 1: the head learned the scene but barely the
-    # action. Measured on 200 runs, seed 0, validation frames and val:1000-1019 (docs/val_choices.py,
-    # docs/action_fidelity.py): scale 1 → spread of the nearest predicted obstacle over the actions
-    # 0.057 m (the simulator's: 0.18 m), 2/20 successes, 6.99 m; scale 10 → 0.183 m, 6/20, 9.34 m.
-    action_scale: float = 10.0  # `HeadConfig.action_scale`
+    # The action enters the head multiplied by this, so that it weighs against a 1280-d feature
+    # (docs/deviations.md#action-scale).
+    action_scale: float = 10.0
+    # Side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
     depth_loss: str = "original"  # `depthq.nets.losses.depth_l1_loss`
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
@@ -117,11 +123,15 @@ class TrainConfig:
     # flipped left to right (a second feature cache), the action negated, the depth bins reversed; a
     # canyon's mirror image is a canyon, and a turn's effect on it is the mirrored turn's.
     mirror: bool = field(default=False, metadata=OMIT_DEFAULT)
-    # Labels (`depthq.data.labels`); the defaults are the original's.
+    # Coll-Q-Net's collision label: a bump within this many frames (docs/design.md#labels).
     horizon: int = HORIZON
+    # Runs shorter than this many frames are not used (docs/design.md#labels).
     min_frames: int = MIN_FRAMES
+    # Drop the samples before every run's end, not only a bumped one's (the original's labels).
     every_run_end: bool = True
+    # Recorded commands clipped to ±this before they become actions.
     action_clip: float = 1.0
+    # 1: label frame t with the command of frame t-1 (the original recorder, likely).
     action_lag: int = 0
     # The weights this checkpoint's policy uses unless told (--which): best (lowest validation loss)
     # or final (after the last epoch, as the original evaluated them); none: final for a depth_first
