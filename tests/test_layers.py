@@ -24,7 +24,8 @@ def _declared_layers() -> list[list[tuple[str, ...]]]:
     paragraphs = (depthq.__doc__ or "").split("\n\n")
     block = next(paragraphs[k + 1] for k, text in enumerate(paragraphs) if text.startswith("Layers,"))
     names = " ".join(re.split(r"\s{2,}", line.strip())[0] for line in block.splitlines() if line[4:5] != " ")
-    return [[tuple(n.strip() for n in unit.split(",")) for unit in layer.split("|")] for layer in names.split("←")]
+    layers = names.split("←")
+    return [[tuple(n.strip() for n in unit.split(",")) for unit in layer.split("|")] for layer in layers]
 
 
 LAYERS = _declared_layers()

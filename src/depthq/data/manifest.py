@@ -31,6 +31,7 @@ Only one process (the collector's parent) writes the manifest; workers only writ
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 from dataclasses import dataclass
@@ -133,6 +134,14 @@ class Dataset:
     def entries(self, split: str | None = None) -> list[RunEntry]:
         """Manifest rows (of one split, or all), sorted by split and index."""
         return [self._runs[key] for key in sorted(self._runs) if split is None or key[0] == split]
+
+    def fingerprint(self) -> str:
+        """SHA-256 of the manifest's run rows (split, index, file hash): equal runs, equal fingerprint.
+        A checkpoint records it (`depthq.nets.checkpoint.DatasetRecord`), and so does a feature cache."""
+        digest = hashlib.sha256()
+        for entry in self.entries():
+            digest.update(f"{entry.split},{entry.index},{entry.sha256}\n".encode())
+        return digest.hexdigest()
 
     def has(self, split: str, index: int) -> bool:
         return (split, index) in self._runs

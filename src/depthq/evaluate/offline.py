@@ -27,7 +27,7 @@ from depthq.errors import ConfigError, DataError
 from depthq.nets.checkpoint import dataset_record, load_qnet, selected, weights_stem
 from depthq.nets.trunk import preprocess
 from depthq.train.config import TrainConfig
-from depthq.train.features import dataset_fingerprint, load_features
+from depthq.train.features import load_features
 from depthq.train.trainer import loss_function
 
 METRICS = {"depth": "abs_diff", "coll": "cross_entropy"}
@@ -68,7 +68,7 @@ def training_data(record: dict[str, Any], data: Path | None) -> Dataset | None:
     recorded = dataset_record(record)
     if data is not None:
         dataset = Dataset.open(Path(data))
-        found = dataset_fingerprint(dataset)
+        found = dataset.fingerprint()
         if recorded.fingerprint is not None and found != recorded.fingerprint:
             raise ConfigError(
                 f"--data {data}: not the dataset this checkpoint was trained on (fingerprint "
@@ -80,7 +80,7 @@ def training_data(record: dict[str, Any], data: Path | None) -> Dataset | None:
     except (ConfigError, DataError) as err:
         why = f"its dataset is not found ({err})"
     else:
-        if recorded.fingerprint is None or dataset_fingerprint(dataset) == recorded.fingerprint:
+        if recorded.fingerprint is None or dataset.fingerprint() == recorded.fingerprint:
             return dataset
         why = f"{recorded.path} no longer holds the runs it was trained on"
     print(f"offline metrics skipped: {why}; pass --data DIR to compute them", file=sys.stderr)

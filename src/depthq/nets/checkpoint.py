@@ -86,7 +86,7 @@ class DatasetRecord:
     """The dataset a checkpoint was trained on: where it was, what it held, how it was made."""
 
     path: str  # absolute
-    fingerprint: str | None  # `depthq.train.features.dataset_fingerprint`; None in a version-1 record
+    fingerprint: str | None  # `depthq.data.manifest.Dataset.fingerprint`; None in a version-1 record
     env: dict[str, Any] | None  # the manifest's "env" block, verbatim; None for a robot's recording
 
 

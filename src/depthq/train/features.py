@@ -23,7 +23,6 @@ of magnitude < 10, so rounding errs by at most 2⁻¹¹ relative (< 0.005 absolu
 
 from __future__ import annotations
 
-import hashlib
 import os
 import queue
 import threading
@@ -55,14 +54,6 @@ def cache_dir(root: Path, trunk: str, size: int, mirrored: bool = False) -> Path
     """Where the features of `trunk` at `size` px for the dataset in `root` live (`mirrored`: those of
     every frame flipped left to right, for a training with mirrored samples)."""
     return Path(root) / FEATURES / f"{trunk}_{size}{'_mirrored' if mirrored else ''}"
-
-
-def dataset_fingerprint(dataset: Dataset) -> str:
-    """SHA-256 of the manifest's run rows (split, index, file hash): equal runs, equal fingerprint."""
-    digest = hashlib.sha256()
-    for entry in dataset.entries():
-        digest.update(f"{entry.split},{entry.index},{entry.sha256}\n".encode())
-    return digest.hexdigest()
 
 
 @dataclass(frozen=True)
@@ -165,7 +156,7 @@ def _index(dataset: Dataset, trunk: str, size: int, mirrored: bool = False) -> d
         "provenance": provenance(),
         "trunk": trunk,
         "input_size": size,
-        "fingerprint": dataset_fingerprint(dataset),
+        "fingerprint": dataset.fingerprint(),
         "runs": runs,
         "shape": [row, spec.feature_dim],
         **({"mirrored": True} if mirrored else {}),

@@ -31,7 +31,7 @@ from depthq.parallel import cores
 from depthq.train import checkpoint
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
-from depthq.train.features import dataset_fingerprint, load_features
+from depthq.train.features import load_features
 from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
 
 LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
@@ -54,7 +54,7 @@ def train(
     out = Path(out)
     where = resolve_device(device)
     dataset = Dataset.open(Path(config.data))
-    fingerprint = dataset_fingerprint(dataset)
+    fingerprint = dataset.fingerprint()
     resuming = checkpoint.check_folder(out, config, fingerprint)
     if resuming and checkpoint.saved_epoch(out) >= config.epochs:
         return out
