@@ -13,7 +13,8 @@ source against it, folders and files):
     ← nets                                  trunks, heads, losses, optimizer, checkpoints read back
     ← policies                              the learned policies (torch or onnxruntime) and
                                             `make_policy`, which builds any policy from its spec
-    ← train                                 the feature cache, samples, the trainer, checkpoints written
+    ← train                                 the trainer, its checkpoints, and the offline metric that
+                                            re-runs its validation
     ← evaluate | deploy                     online evaluation | ONNX export and the robot step
     ← report | bench                        the reproduction pipeline | `depthq bench` figures
     ← scripts ← cli                         one module per verb, the `depthq` command

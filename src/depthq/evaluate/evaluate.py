@@ -269,7 +269,7 @@ def evaluate(
     files to `out`; a Q-net runs on `device` (`depthq.nets.device`). `video`: the first canyon as
     video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`).
     `data`: a checkpoint's dataset for the offline metrics, when it is no longer where it was
-    (`depthq.evaluate.offline`)."""
+    (`depthq.train.offline_metric`)."""
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
 
@@ -281,7 +281,7 @@ def evaluate(
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
         # the training stack (tensorboard included) only for a checkpoint, not in every worker
-        from depthq.evaluate.offline import training_data
+        from depthq.train.offline_metric import training_data
 
         policy_spec = str(Path(policy_spec).resolve())
         executor.check_shared(Path(policy_spec))
@@ -292,7 +292,7 @@ def evaluate(
     ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None
     if dataset is not None:
-        from depthq.evaluate.offline import offline_metric  # the training stack, as above
+        from depthq.train.offline_metric import offline_metric  # the training stack, as above
 
         offline = offline_metric(Path(policy_spec), dataset, which=config.which)
     summary = {

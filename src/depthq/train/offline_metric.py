@@ -1,5 +1,7 @@
 """Table I's offline columns: a checkpoint's loss on every validation sample of its dataset —
 the training loss: absolute difference on the near bins (Depth-Q-Net) or binary cross-entropy (Coll-Q-Net).
+Training's validation re-run on the whole split, so it lives beside the trainer whose loss it takes;
+`depthq.evaluate` reports it with the online metrics.
 
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead) is measured on its first step,
 t+1, with the one-step loss: the quantity a one-step net's column holds, so a sweep over lookaheads
