@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from pathlib import Path
 
 from depthq.evaluate.evaluate import EvalConfig, data_rate, drive_canyons
 from depthq.nets.device import resolve_device
+from depthq.policies.spec import PolicySpec
 
 
 def bench_evaluate(
-    spec: str,
+    spec: str | PolicySpec,
     canyons: tuple[str, ...],
     workers: int = 2,
     time_limit_s: float | None = None,
@@ -22,7 +22,7 @@ def bench_evaluate(
     """Wall seconds of `drive_canyons` for `spec` in `canyons`, sequential then lock-step: workers'
     start (processes, policy, simulators) and every run, no files written, no offline metric."""
     where = str(resolve_device(device))
-    spec = str(Path(spec).resolve()) if Path(spec).is_dir() else spec
+    spec = PolicySpec.parse(spec).resolved()
     config = EvalConfig(canyons=canyons, time_limit_s=time_limit_s, decision_hz=data_rate(spec))
     seconds, runs = {}, {}
     for name, lockstep in (("sequential", False), ("lockstep", True)):
@@ -32,7 +32,7 @@ def bench_evaluate(
     decisions = sum(r["steps"] for r in runs["lockstep"])
     actions = [[r["actions"].tolist() for r in runs[name]] for name in seconds]
     return {
-        "policy": Path(spec).name,
+        "policy": spec.name,
         "canyons": len(canyons),
         "workers": workers,
         "decisions": decisions,

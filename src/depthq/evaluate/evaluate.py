@@ -34,6 +34,7 @@ from depthq.nets.checkpoint import dataset_record, policy_record, read_config, w
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
 from depthq.policies.registry import make_policy
+from depthq.policies.spec import PolicySpec
 from depthq.sim.canyon import (
     FAMILIES,
     FRESH,
@@ -109,19 +110,21 @@ class EvalConfig:
         return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
 
 
-def data_rate(policy_spec: str) -> float:
+def data_rate(policy_spec: str | PolicySpec) -> float:
     """The decision rate a checkpoint records (its training data's); the default for any other policy."""
-    if not Path(policy_spec).is_dir():
+    checkpoint = PolicySpec.parse(policy_spec).checkpoint
+    if checkpoint is None:
         return DEFAULT_DECISION_HZ
-    return policy_record(read_config(Path(policy_spec))).decision_hz
+    return policy_record(read_config(checkpoint)).decision_hz
 
 
-def default_canyons(policy_spec: str) -> str:
+def default_canyons(policy_spec: str | PolicySpec) -> str:
     """The evaluation canyons of the family a checkpoint's data was collected in ('eval' for the
     paper's, 'hard/eval', ...); the paper's for any other policy and for a robot's recording."""
-    if not Path(policy_spec).is_dir():
+    checkpoint = PolicySpec.parse(policy_spec).checkpoint
+    if checkpoint is None:
         return "eval"
-    env = dataset_record(read_config(Path(policy_spec))).env or {}
+    env = dataset_record(read_config(checkpoint)).env or {}
     return eval_set(env.get("world", {}).get("family", PAPER))
 
 
@@ -183,7 +186,7 @@ class _EvalWorker:
     `depthq.parallel`): a share's canyons in lock-step (`depthq.evaluate.lockstep`) or one by one."""
 
     def __init__(
-        self, policy_spec: str, config: EvalConfig, device: str = "cpu", video: bool = False
+        self, policy_spec: PolicySpec, config: EvalConfig, device: str = "cpu", video: bool = False
     ) -> None:
         # Same float sums in every process (results independent of W), and a batched decision's
         # values those of one frame alone (docs/design.md#lockstep).
@@ -227,7 +230,7 @@ def shares(canyons: tuple[str, ...], lockstep: bool, workers: int) -> list[tuple
 
 
 def drive_canyons(
-    policy_spec: str,
+    policy_spec: str | PolicySpec,
     config: EvalConfig,
     workers: int = 2,
     progress: bool = False,
@@ -238,10 +241,11 @@ def drive_canyons(
     """Every canyon of `config` driven by `policy_spec` (a checkpoint by its absolute path) on torch
     `device`, in `executor`'s `workers`: the runs (`RunRecord.result`) in `config.canyons`' order."""
     runs: dict[int, dict[str, Any]] = {}
+    policy_spec = PolicySpec.parse(policy_spec)
     make_worker = partial(_EvalWorker, policy_spec, config, device, video)
     with tqdm(
         total=len(config.canyons),
-        desc=f"evaluate {Path(policy_spec).name}",
+        desc=f"evaluate {policy_spec.name}",
         unit="canyon",
         disable=not progress,
         dynamic_ncols=True,
@@ -255,7 +259,7 @@ def drive_canyons(
 
 
 def evaluate(
-    policy_spec: str,
+    policy_spec: str | PolicySpec,
     out: Path,
     config: EvalConfig = EvalConfig(),
     workers: int = 2,
@@ -274,18 +278,18 @@ def evaluate(
         raise ConfigError(f"--workers must be >= 1, got {workers}")
 
     where = str(resolve_device(device))
-    # a bad spec fails here, before any worker starts
+    policy_spec = PolicySpec.parse(policy_spec)  # a bad spec fails here, before any worker starts
     description = make_policy(
         policy_spec, seed=config.seed, which=config.which, device=where, selection=config.selection
     ).describe()
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
-    if Path(policy_spec).is_dir():  # a checkpoint, which every worker loads: the same path on every node
+    if policy_spec.checkpoint is not None:  # which every worker loads: the same path on every node
         # the training stack (tensorboard included) only for a checkpoint, not in every worker
         from depthq.train.offline_metric import training_data
 
-        policy_spec = str(Path(policy_spec).resolve())
-        executor.check_shared(Path(policy_spec))
-        dataset = training_data(read_config(Path(policy_spec)), data)
+        policy_spec = policy_spec.resolved()
+        executor.check_shared(policy_spec.checkpoint)
+        dataset = training_data(read_config(policy_spec.checkpoint), data)
     if config.decision_hz is None:
         config = replace(config, decision_hz=data_rate(policy_spec))
     start = time.perf_counter()
@@ -294,7 +298,7 @@ def evaluate(
     if dataset is not None:
         from depthq.train.offline_metric import offline_metric  # the training stack, as above
 
-        offline = offline_metric(Path(policy_spec), dataset, which=config.which)
+        offline = offline_metric(policy_spec.checkpoint, dataset, which=config.which)
     summary = {
         "policy": description,
         "config": to_dict(config),

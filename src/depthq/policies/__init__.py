@@ -1,2 +1,2 @@
 """The learned policies, above `depthq.nets`: a checkpoint's Q-net on torch (`qnet`), an exported graph
-on onnxruntime (`onnx`), and `registry.make_policy`, which builds any policy from its `spec`."""
+on onnxruntime (`onnx`); `spec.PolicySpec` names any policy, `registry.make_policy` builds it."""

@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch: when this verb runs, not at the CLI's startup
     from depthq.evaluate.evaluate import data_rate
     from depthq.policies.registry import make_policy
+    from depthq.policies.spec import PolicySpec
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
     from depthq.sim.world import WorldConfig, world_for
 
@@ -42,8 +43,9 @@ def run(args: argparse.Namespace) -> int:
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     device = str(resolve_device(args.device))
-    policy = make_policy(args.policy, seed=args.seed, which=args.which, device=device)
-    world = WorldConfig(decision_hz=data_rate(args.policy) if args.hz is None else args.hz)
+    spec = PolicySpec.parse(args.policy)
+    policy = make_policy(spec, seed=args.seed, which=args.which, device=device)
+    world = WorldConfig(decision_hz=data_rate(spec) if args.hz is None else args.hz)
     limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
     env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))
     try:

@@ -51,11 +51,13 @@ def run(args: argparse.Namespace) -> int:
         evaluate,
         parse_canyon_set,
     )
+    from depthq.policies.spec import PolicySpec
 
-    canyons = parse_canyon_set(args.canyons or default_canyons(args.policy))
+    spec = PolicySpec.parse(args.policy)
+    canyons = parse_canyon_set(args.canyons or default_canyons(spec))
     config = config_from_args(EvalConfig, args, canyons=canyons)
     result = evaluate(
-        args.policy, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
+        spec, args.out, config, workers=args.workers, device=args.device, video=not args.no_video,
         executor=executor_from(args), data=args.data,
     )
     s = result["summary"]
