@@ -112,7 +112,9 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
 
 @pytest.mark.slow
 def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: Path) -> None:
-    out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
+    # The paper's head: the only one a checkpoint of an older format can hold.
+    out = train(_config(data, epochs=1, head_form="concat"), tmp_path / "run", progress=False)
+    assert read_json(out / "config.json")["train"]["select"] == "best"
     record = read_json(out / "config.json")
 
     future = tmp_path / "future"
@@ -121,6 +123,22 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     with pytest.raises(ConfigError, match=r"future/config\.json: checkpoint format version 7, .* 1 to 3"):
         load_qnet(future)
     assert main(["export", str(future), "--out", str(tmp_path / "onnx")]) == 2
+
+    # A sweep finds a finished folder trained otherwise than the model of that name now means (the
+    # paper's head, before the depth-first head became the default): an error, not a reused model.
+    from depthq.report.reproduce import _trained
+    with pytest.raises(ConfigError, match=r"differs in: head_form, select"):
+        _trained(_config(data, epochs=1), out)
+    assert _trained(_config(data, epochs=1, head_form="concat"), out)
+
+    # Version 3 before `head_form` was recorded: the paper's head, its best weights.
+    before = tmp_path / "v3"
+    shutil.copytree(out, before)
+    v3 = {**record, "train": {k: v for k, v in record["train"].items() if k != "head_form"}}
+    v3["head"] = {k: v for k, v in record["head"].items() if k != "form"}
+    (before / "config.json").write_text(json.dumps(v3))
+    assert read_config(before)["train"] == record["train"]
+    assert load_qnet(before)[0].head.config.form == "concat"
 
     # Version 2, the layout before `dataset` and `policy`: its rate from its dataset's manifest.
     old = tmp_path / "v2"
@@ -134,7 +152,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert upgraded["policy"] == record["policy"] and upgraded["train"] == record["train"]
     head = {f"head.{k}": v for k, v in net.head.state_dict().items()}
     assert _equal(_tensors(old / "best.safetensors"), head)
-    assert train(_config(data, epochs=2), old, progress=False) == old  # resumed: the same training
+    assert train(_config(data, epochs=2, head_form="concat"), old, progress=False) == old  # resumed
     assert read_json(old / "config.json")["format_version"] == 3
 
 
