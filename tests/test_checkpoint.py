@@ -62,7 +62,9 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert (policy["decision_hz"], policy["frame_size"]) == (DEFAULT_DECISION_HZ, [308, 410])
     assert policy["actions"] == [-1, 0, 1] and policy["selection"] == "farthest_nearest_bin"
     assert policy["bins"]["clip"] == 2.0
-    assert record["train"]["select"] == "best" and record["provenance"]["package"] == "depthq"
+    # The default Depth-Q-Net: the depth-first head, acting with its final weights; both recorded.
+    assert (record["train"]["head_form"], record["head"]["form"]) == ("depth_first", "depth_first")
+    assert record["train"]["select"] == "final" and record["provenance"]["package"] == "depthq"
 
     b.mkdir()
     shutil.move(a / "ckpt", b / "ckpt")
@@ -79,7 +81,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert "offline metrics skipped: its dataset is not found" in capsys.readouterr().err
     summary = read_json(c / "eval" / "summary.json")
     assert summary["config"]["decision_hz"] == HZ and "offline" not in summary
-    assert summary["runs"][0]["steps"] <= 2 * HZ and summary["policy"]["weights"] == "best"
+    assert summary["runs"][0]["steps"] <= 2 * HZ and summary["policy"]["weights"] == "last"
 
     assert main(["drive", "--policy", ckpt, "--canyon", "eval:0", "--time-limit", "2", "--frames", "2",
                  "--out", "drive", "--json"]) == 0
