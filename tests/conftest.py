@@ -25,7 +25,7 @@ def small_dataset(tmp_path_factory):
     """The suite's small collected dataset, for every test that needs "some runs": 6 training runs
     (3 end in a bump) and 2 validation runs of ≤ 60 steps, seed 0; collected once per session. Tests
     may add to its feature cache (training does) but must not change its runs: copy it first."""
-    from depthq.data.collect import CollectConfig, collect
+    from depthq.data.recorder import CollectConfig, collect
 
     root = tmp_path_factory.mktemp("small") / "data"
     collect(root, CollectConfig(runs=6, val_runs=2, max_steps=60), seed=0, workers=1, progress=False)

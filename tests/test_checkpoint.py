@@ -17,7 +17,7 @@ from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate
+from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, load_qnet, read_config
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ

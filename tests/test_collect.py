@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from depthq.cli import main
-from depthq.data.collect import CollectConfig, collect
 from depthq.data.manifest import Dataset
+from depthq.data.recorder import CollectConfig, collect
 from depthq.errors import ConfigError
 from depthq.sim.world import TURTLEBOT3_MAX_YAW_RATE
 
@@ -57,7 +57,7 @@ def test_runs_are_real_exploration_runs(reference):
 
 def test_runs_replay_the_original_recorder_without_a_camera():
     """Frames 0..8 are dropped from the very same drive: a run without skipping holds them first."""
-    from depthq.data.collect import collect_run
+    from depthq.data.recorder import collect_run
     from depthq.sim.env import CanyonEnv
 
     env = CanyonEnv(CONFIG.env, camera=False)

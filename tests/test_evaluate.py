@@ -10,8 +10,8 @@ from depthq.cli import main
 from depthq.control import action_selection
 from depthq.control.action_selection import depth_scores, select_coll_action, select_depth_action
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.metrics import distance_from_spawn, imitation_loss, path_length
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.sim.world import DEFAULT_DECISION_HZ
 
 ACTIONS = np.array(action_selection.ACTIONS)  # the candidates, as the selection rules take them

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from depthq import experiments
-from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
-from depthq.evaluate.evaluate import EvalConfig
+from depthq.data.recorder import CollectConfig, collect, exploration_env
+from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.experiments import (
     ablation,

@@ -33,7 +33,7 @@ def test_paper_canyons_are_unchanged():
 
 def test_paper_configs_keep_their_bytes():
     """No new key in a paper config: manifests and setups written before families still match."""
-    from depthq.data.collect import CollectConfig, exploration_env
+    from depthq.data.recorder import CollectConfig, exploration_env
 
     text = json.dumps(to_dict(CollectConfig()))
     assert "family" not in text and "obstacles" not in text
@@ -67,7 +67,7 @@ def test_canyon_ids_name_their_family():
 
 
 def test_canyon_sets_parse_families_and_refuse_bad_names():
-    from depthq.evaluate.evaluate import EvalConfig, parse_canyon_set
+    from depthq.evaluate.online import EvalConfig, parse_canyon_set
 
     assert parse_canyon_set("hard/val:1000-1002") == ("hard/val:1000", "hard/val:1001", "hard/val:1002")
     assert parse_canyon_set("hard/eval") == tuple(f"hard/eval:{i}" for i in range(20))
@@ -86,7 +86,7 @@ def test_hard_episode_renders_and_ends_at_the_canyon_end_with_its_metrics():
     """The heuristic expert in a hard val canyon, camera on (small frames): real pixels, the world of
     the canyon's family, and the new metrics of the run."""
     from depthq.control.heuristic import DepthHeuristic
-    from depthq.evaluate.evaluate import drive
+    from depthq.evaluate.online import drive
     from depthq.sim.env import CanyonEnv, EnvConfig
     from depthq.sim.mjcf import CameraConfig
     from depthq.sim.world import WorldConfig
@@ -131,8 +131,8 @@ def test_a_collision_ends_the_run_and_its_distance_to_collision_is_the_progress(
 
 
 def test_collect_in_the_hard_family_records_it(tmp_path):
-    from depthq.data.collect import CollectConfig, collect, exploration_env
     from depthq.data.manifest import Dataset
+    from depthq.data.recorder import CollectConfig, collect, exploration_env
 
     config = CollectConfig(runs=1, val_runs=0, max_steps=28, env=exploration_env(family="hard"))
     collect(tmp_path / "d", config, seed=0, progress=False)
@@ -170,8 +170,8 @@ def test_sweep_setup_records_the_family_and_refuses_another(tmp_path):
 @pytest.mark.slow
 def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_path):
     """A network trained on hard canyons is tested in hard ones unless told otherwise."""
-    from depthq.data.collect import CollectConfig, collect, exploration_env
-    from depthq.evaluate.evaluate import default_canyons
+    from depthq.data.recorder import CollectConfig, collect, exploration_env
+    from depthq.evaluate.online import default_canyons
     from depthq.train.config import TrainConfig
     from depthq.train.trainer import train
 
@@ -186,7 +186,7 @@ def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_pat
 def test_fresh_streams_are_test_sets_no_project_code_draws_from(tmp_path):
     """`stream7:0-19`: canyons of a stream no dataset, choice or table uses, in either family,
     disjoint from train/val/eval; a stream that aliases one of those, or is unknown, is refused by name."""
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 
     assert parse_canyon_set("hard/stream7:0-1") == ("hard/stream7:0", "hard/stream7:1")
     assert parse_canyon_set("stream3:4,2") == ("stream3:4", "stream3:2")

@@ -20,8 +20,8 @@ from depthq.control.action_selection import TIE_TOL, select_coll_action, select_
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
-from depthq.evaluate.evaluate import EvalConfig, drive, evaluate, parse_canyon_set, shares
 from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
+from depthq.evaluate.online import EvalConfig, drive, evaluate, parse_canyon_set, shares
 from depthq.nets.heads import HeadConfig, QNet, build_head
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy

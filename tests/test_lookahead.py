@@ -243,7 +243,7 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 
 @pytest.mark.slow
 def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: Path, tmp_path: Path) -> None:
-    from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+    from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
     from depthq.nets.checkpoint import load_qnet
     from depthq.policies.qnet import QNetPolicy
     from depthq.policies.registry import make_policy
@@ -303,7 +303,7 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
 
 
 def test_evaluate_flags_choose_the_selection_rule_and_refuse_a_bad_one() -> None:
-    from depthq.evaluate.evaluate import EvalConfig
+    from depthq.evaluate.online import EvalConfig
     from depthq.scripts.evaluate import add_arguments
 
     parser = argparse.ArgumentParser()

@@ -12,7 +12,7 @@ import pytest
 from depthq.cli import main
 from depthq.control.action_selection import Selection
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, OracleWorld, agreement, drive_oracle, env_config
 from depthq.sim.env import SPAWN
 from depthq.train.config import TrainConfig

@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 
 from depthq.cli import main
-from depthq.data.collect import CollectConfig, collect
+from depthq.data.recorder import CollectConfig, collect
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate
+from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.parallel import Executor, _probe_shared
 
 ray = pytest.importorskip("ray")

@@ -9,7 +9,7 @@ import pytest
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import data_rate, default_canyons
+from depthq.evaluate.online import decision_rate, default_canyons
 from depthq.policies.registry import make_policy
 from depthq.policies.spec import PolicySpec
 from depthq.sim.world import DEFAULT_DECISION_HZ
@@ -36,6 +36,6 @@ def test_a_spec_names_a_builtin_an_onnx_file_or_a_checkpoint_folder(tmp_path: Pa
 def test_builtins_build_and_take_the_defaults() -> None:
     assert isinstance(make_policy("heuristic"), DepthHeuristic)
     assert isinstance(make_policy(PolicySpec("ou"), seed=3), OUPolicy)
-    assert data_rate("heuristic") == DEFAULT_DECISION_HZ and default_canyons(PolicySpec("ou")) == "eval"
+    assert decision_rate("heuristic") == DEFAULT_DECISION_HZ and default_canyons(PolicySpec("ou")) == "eval"
     with pytest.raises(ConfigError, match="unknown policy"):
         make_policy("nowhere")

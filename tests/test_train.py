@@ -14,8 +14,8 @@ from safetensors.torch import load, load_file, save
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.data.collect import CollectConfig, collect, exploration_env
 from depthq.data.manifest import Dataset
+from depthq.data.recorder import CollectConfig, collect, exploration_env
 from depthq.data.views import DepthView
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args
@@ -24,9 +24,9 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.policies.qnet import QNetPolicy
 from depthq.scripts.train import add_arguments
-from depthq.train.checkpoint import build_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import cache_dir, load_features
+from depthq.train.folder import build_qnet
 from depthq.train.samples import ImageSamples
 from depthq.train.trainer import DivergedError, train
 

@@ -6,7 +6,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from depthq.data.collect import CollectConfig, collect
+from depthq.data.recorder import CollectConfig, collect
 
 
 def bench_collect(runs: int = 20, workers: tuple[int, ...] = (1, 2)) -> dict:

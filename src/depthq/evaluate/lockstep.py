@@ -3,7 +3,7 @@ step of every live run at a time, so that a `BatchPolicy` decides for all of the
 Q-net: one trunk pass over all their frames). A run that ends drops out and the others go on.
 
 Each run has its own env and seeds, and a `BatchPolicy` gives each frame the decision `act` gives
-it alone, so every run is the one `depthq.evaluate.evaluate.drive` gives: the same actions, the same
+it alone, so every run is the one `depthq.evaluate.online.drive` gives: the same actions, the same
 records. A policy without a batch call, or with per-run state (OU noise), drives each run with an
 instance of its own, one `act` at a time.
 """

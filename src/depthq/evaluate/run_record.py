@@ -1,5 +1,5 @@
 """What an evaluation keeps of one run, decision by decision, and the run's metrics at its end
-(docs/design.md#metrics). Driving one canyon at a time (`depthq.evaluate.evaluate.drive`) and
+(docs/design.md#metrics). Driving one canyon at a time (`depthq.evaluate.online.drive`) and
 driving several in lock-step (`depthq.evaluate.lockstep`) keep their runs alike through it."""
 
 from __future__ import annotations

@@ -27,10 +27,10 @@ from typing import Any
 import numpy as np
 
 from depthq.control.heuristic import DepthHeuristic
-from depthq.data.collect import CollectConfig, collect_run, exploration_env
 from depthq.data.labels import MIN_FRAMES
-from depthq.evaluate.evaluate import drive, parse_canyon_set
+from depthq.data.recorder import CollectConfig, collect_run, exploration_env
 from depthq.evaluate.metrics import summarize
+from depthq.evaluate.online import drive, parse_canyon_set
 from depthq.sim.canyon import (
     HARD_CANYON,
     CanyonConfig,

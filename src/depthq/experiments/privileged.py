@@ -30,7 +30,7 @@ from depthq.control.action_selection import ACTIONS, select_action
 from depthq.data.manifest import Dataset
 from depthq.data.views import run_then_frame, view_arrays
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import parse_canyon_set
+from depthq.evaluate.online import parse_canyon_set
 from depthq.evaluate.oracle import env_config
 from depthq.nets.heads import HeadConfig, build_head, probability
 from depthq.nets.optim import make_optimizer

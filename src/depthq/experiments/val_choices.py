@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from depthq.configio import read_json
-from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 

@@ -2,7 +2,7 @@
 data), the weight files and their digests, the format's version, and reading a network back.
 
 This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
-`depthq.train.checkpoint`) and `depthq.policies` (which read them), so a policy needs nothing from
+`depthq.train.folder`) and `depthq.policies` (which read them), so a policy needs nothing from
 training, nor the dataset: a checkpoint folder describes itself.
 
 config.json (format version 3):
@@ -174,7 +174,7 @@ def _metadata(blob: bytes, path: Path) -> dict[str, str]:
         raise DataError(f"{path}: unreadable safetensors header ({err})") from err
 
 
-def write_config(
+def write_record(
     folder: Path,
     train: dict[str, Any],
     head: HeadConfig,

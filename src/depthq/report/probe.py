@@ -25,12 +25,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from depthq.data.collect import CollectConfig, collect, collect_run, exploration_env
 from depthq.data.labels import HORIZON, MIN_FRAMES
+from depthq.data.recorder import CollectConfig, collect, collect_run, exploration_env
 from depthq.data.stats import PAPER_TABLE2
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.figures import plot_agreement
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig

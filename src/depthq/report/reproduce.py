@@ -6,7 +6,7 @@ Output folder:
     OUT/reproduce.json            the sweep (a preset, or a widened one) and package version of the folder
     OUT/data/                     the dataset (docs/formats.md#dataset) and its feature cache
     OUT/models/<model>/           checkpoints, e.g. models/depth_n200_s1 (see depthq.report.layout and
-                                  depthq.train.checkpoint)
+                                  depthq.train.folder)
     OUT/eval/<name>/              evaluations: summary.json, runs.csv, trajectories (+ heuristic, ou)
     OUT/stages.json               measured seconds of every stage
     OUT/table1.md|csv, table2.md, fig4_qualitative.png, fig5_convergence.png, success_vs_runs.png,
@@ -29,10 +29,10 @@ from pathlib import Path
 from tqdm import tqdm
 
 from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict, write_json
-from depthq.data.collect import CollectConfig, collect, collection_complete, exploration_env
 from depthq.data.manifest import Dataset
+from depthq.data.recorder import CollectConfig, collect, collection_complete, exploration_env
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import TRUNKS
@@ -40,9 +40,9 @@ from depthq.parallel import LOCAL, Executor, Job, cores
 from depthq.report.build import best_depth_eval, build_report
 from depthq.report.presets import get_preset
 from depthq.report.sweep import SETUP_DEFAULTS, Sweep
-from depthq.train.checkpoint import saved_epoch, settings_differing
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
+from depthq.train.folder import saved_epoch, settings_differing
 from depthq.train.trainer import train
 
 

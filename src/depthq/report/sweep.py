@@ -16,7 +16,7 @@ from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from depthq.errors import ConfigError
-from depthq.evaluate.evaluate import parse_canyon_set
+from depthq.evaluate.online import parse_canyon_set
 from depthq.report.layout import NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import DEFAULT_DECISION_HZ

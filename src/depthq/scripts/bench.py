@@ -125,7 +125,7 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     if args.what == "evaluate":
         _positive("--workers", args.workers)
         from depthq.bench.evaluate import bench_evaluate  # torch, mujoco: off the CLI's startup
-        from depthq.evaluate.evaluate import parse_canyon_set
+        from depthq.evaluate.online import parse_canyon_set
 
         canyons = parse_canyon_set(args.canyons)
         r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device)

@@ -24,13 +24,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
     add_executor_arguments(p)
-    from depthq.data.collect import CollectConfig  # MuJoCo: only when this verb's flags are built
+    from depthq.data.recorder import CollectConfig  # MuJoCo: only when this verb's flags are built
 
     add_config_arguments(p, CollectConfig, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.data.collect import CollectConfig, collect, exploration_env  # MuJoCo: when this verb runs
+    from depthq.data.recorder import CollectConfig, collect, exploration_env  # MuJoCo: when this verb runs
 
     hz = {} if args.hz is None else {"decision_hz": args.hz}
     env = exploration_env(**hz, family=args.family)

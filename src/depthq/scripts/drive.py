@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch: when this verb runs, not at the CLI's startup
-    from depthq.evaluate.evaluate import data_rate
+    from depthq.evaluate.online import decision_rate
     from depthq.policies.registry import make_policy
     from depthq.policies.spec import PolicySpec
     from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     device = str(resolve_device(args.device))
     spec = PolicySpec.parse(args.policy)
     policy = make_policy(spec, seed=args.seed, which=args.which, device=device)
-    world = WorldConfig(decision_hz=data_rate(spec) if args.hz is None else args.hz)
+    world = WorldConfig(decision_hz=decision_rate(spec) if args.hz is None else args.hz)
     limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
     env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))
     try:

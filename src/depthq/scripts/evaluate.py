@@ -39,13 +39,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.add_argument("--no-video", action="store_true", help="skip video.mp4 of the first canyon")
     add_executor_arguments(p)
-    from depthq.evaluate.evaluate import EvalConfig  # MuJoCo: only when this verb's flags are built
+    from depthq.evaluate.online import EvalConfig  # MuJoCo: only when this verb's flags are built
 
     add_config_arguments(p, EvalConfig, exclude=("canyons",), aliases=_ALIASES, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.evaluate.evaluate import (  # MuJoCo and torch
+    from depthq.evaluate.online import (  # MuJoCo and torch
         EvalConfig,
         default_canyons,
         evaluate,

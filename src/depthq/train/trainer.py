@@ -28,7 +28,7 @@ from depthq.nets.losses import coll_bce_loss, depth_l1_loss, lookahead_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.parallel import cores
-from depthq.train import checkpoint
+from depthq.train import folder
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
@@ -44,7 +44,7 @@ class DivergedError(ConfigError):
 def train(
     config: TrainConfig, out: Path, progress: bool = True, device: str = "auto", threads: int | None = None
 ) -> Path:
-    """Train `config` into the folder `out` (layout: `depthq.train.checkpoint`) and return it.
+    """Train `config` into the folder `out` (layout: `depthq.train.folder`) and return it.
 
     A folder holding this training resumes from its last epoch, bit for bit as if never stopped (on
     the CPU, with the same `threads`: torch sums floats in an order that depends on their number;
@@ -55,25 +55,25 @@ def train(
     where = resolve_device(device)
     dataset = Dataset.open(Path(config.data))
     fingerprint = dataset.fingerprint()
-    resuming = checkpoint.check_folder(out, config, fingerprint)
-    if resuming and checkpoint.saved_epoch(out) >= config.epochs:
+    resuming = folder.check_folder(out, config, fingerprint)
+    if resuming and folder.saved_epoch(out) >= config.epochs:
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(threads or cores())
-    checkpoint.write_config(out, config, dataset, fingerprint, torch.get_num_threads())
+    folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
     torch.manual_seed(config.seed)  # head initialisation and dropout
-    model = checkpoint.build_qnet(config).to(where)
+    model = folder.build_qnet(config).to(where)
     c = config
     optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
     loss_fn = loss_function(config)
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
     val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
-    state = checkpoint.load_state(out, model, optimizer, rng)
+    state = folder.load_state(out, model, optimizer, rng)
     if config.feature_projection and not state.epoch:  # a resumed training's is in its checkpoint
         # On the training samples' cached features (a frozen trunk's: TrainConfig allows no other),
         # never the validation split's.
@@ -114,8 +114,8 @@ def train(
             }
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
-            state = checkpoint.TrainState(epoch, [*state.history, row], row if is_best else state.best)
-            checkpoint.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots)
+            state = folder.TrainState(epoch, [*state.history, row], row if is_best else state.best)
+            folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots)
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
@@ -210,7 +210,7 @@ def _check_labels(config: TrainConfig, targets: np.ndarray) -> None:
         )
 
 
-def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: checkpoint.TrainState) -> None:
+def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: folder.TrainState) -> None:
     if not math.isfinite(loss):
         kept = (f"the last good checkpoint (epoch {state.epoch}) is kept in {out}" if state.epoch
                 else f"no epoch finished, so {out} holds no weights")

@@ -110,7 +110,7 @@ class EvalConfig:
         return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
 
 
-def data_rate(policy_spec: str | PolicySpec) -> float:
+def decision_rate(policy_spec: str | PolicySpec) -> float:
     """The decision rate a checkpoint records (its training data's); the default for any other policy."""
     checkpoint = PolicySpec.parse(policy_spec).checkpoint
     if checkpoint is None:
@@ -291,7 +291,7 @@ def evaluate(
         executor.check_shared(policy_spec.checkpoint)
         dataset = training_data(read_config(policy_spec.checkpoint), data)
     if config.decision_hz is None:
-        config = replace(config, decision_hz=data_rate(policy_spec))
+        config = replace(config, decision_hz=decision_rate(policy_spec))
     start = time.perf_counter()
     ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None

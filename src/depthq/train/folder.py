@@ -51,8 +51,8 @@ from depthq.nets.checkpoint import (
     snapshot_stem,
     stored_parts,
     weights_bytes,
+    write_record,
 )
-from depthq.nets.checkpoint import write_config as write_record
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.trunk import build_trunk
 from depthq.sim.sensors import BinConfig
@@ -136,7 +136,7 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     return True
 
 
-def write_config(
+def record_training(
     out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str, threads: int | None = None
 ) -> None:
     """config.json: the training, its dataset (absolute path, fingerprint, env config as its manifest
