@@ -34,15 +34,17 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
+from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
-from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, write_run
+from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.errors import ConfigError, DataError
 
 MANIFEST = "manifest.json"
@@ -170,6 +172,36 @@ class Dataset:
         """Write a run's file and record it (one process; parallel workers use write_run + add)."""
         info = write_run(self.run_path(run.meta.split, run.meta.index), run, jpeg_quality)
         return self.add(run.meta, info)
+
+    def set_camera_labels(self, entry: RunEntry, labels: CameraLabels) -> RunEntry:
+        """Write camera `labels` into run `entry`'s file (rewritten, its frames copied byte for byte)
+        and record the file's new size and hash: its fingerprint changes (docs/formats.md#camera-labels).
+        An interruption between the file's rename and the manifest's is mended by `adopt_labelled`."""
+        with self.reader(entry) as reader:
+            info = write_labelled(self.path(entry), reader, labels)
+        return self._record(entry, info)
+
+    def adopt_labelled(self, entry: RunEntry) -> RunEntry | None:
+        """Run `entry`'s file as `set_camera_labels` left it when stopped before the manifest was
+        written: if the file holds camera labels and, written without them, is the recorded file (the
+        manifest's size and hash), its new size and hash are recorded and the new row returned; else None."""
+        path = self.path(entry)
+        try:
+            with RunReader(path) as reader, tempfile.TemporaryDirectory(prefix=".", dir=path.parent) as tmp:
+                if reader.camera_labels() is None:
+                    return None
+                recorded = write_labelled(Path(tmp) / path.name, reader, None)
+        except DataError:
+            return None
+        if recorded != entry.info:
+            return None
+        return self._record(entry, FileInfo(sha256=file_sha256(path), bytes=path.stat().st_size))
+
+    def _record(self, entry: RunEntry, info: FileInfo) -> RunEntry:
+        new = replace(entry, sha256=info.sha256, bytes=info.bytes)
+        self._runs[(entry.split, entry.index)] = new
+        self._write_manifest()
+        return new
 
     def reader(self, entry: RunEntry) -> RunReader:
         """An open reader of a run's file, checked against the manifest first."""

@@ -11,6 +11,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from depthq.data.camera_labels import CameraLabels
 from depthq.sim.sensors import N_RAYS
 
 SPLITS = ("train", "val")
@@ -77,6 +78,7 @@ class Run:
     actions: np.ndarray  # float32 (N,), rad/s; actions[-1] is NaN
     poses: np.ndarray  # float32 (N, 3): x, y, yaw
     times: np.ndarray  # float32 (N,), seconds since the start of the run
+    camera: CameraLabels | None = None  # bins estimated from the camera (`depthq label`), if written
 
     def __post_init__(self) -> None:
         n = self.meta.n_frames
@@ -89,6 +91,9 @@ class Run:
         _check(self.times, "times", np.float32, (n,))
         if not np.isfinite(self.actions[:-1]).all() or not np.isnan(self.actions[-1]):
             raise ValueError(f"run {self.meta.name}: actions must be finite except the last, which is NaN")
+        if self.camera is not None and self.camera.bins.shape != self.bins.shape:
+            raise ValueError(f"run {self.meta.name}: camera labels {self.camera.bins.shape} do not match "
+                             f"its bins {self.bins.shape}")
 
     @property
     def n_frames(self) -> int:

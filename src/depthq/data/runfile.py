@@ -9,13 +9,16 @@ Layout of `runs/<split>_<index>.h5` (all datasets at the root, contiguous, uncom
     actions       float32 (N,)           yaw rate applied after frame t; actions[N-1] = NaN
     poses         float32 (N, 3)         x, y, yaw
     times         float32 (N,)           seconds since the start of the run
+    camera_bins   float32 (N, 26)        optional: bins estimated from the camera (`depthq label`),
+                                         attributes labels_version, labeller, labeller_fingerprint
     attributes    format, format_version, image_shape (H, W, 3), jpeg_quality, and every RunMeta field
 
 One flat byte buffer plus offsets makes a random frame one small contiguous read. Files are
 written under a temporary name and renamed when complete, with no timestamps inside, so equal
 runs give equal bytes. The file's SHA-256 (returned by `write_run`, kept in the manifest) is
 checked before a file is read as data; anything h5py, Pillow or the shape checks reject is
-raised as a DataError naming the file.
+raised as a DataError naming the file. `camera_bins` is optional and carries its own version: a run
+without it is written byte for byte as before, and a reader that knows nothing of it reads the rest.
 """
 
 from __future__ import annotations
@@ -24,13 +27,14 @@ import hashlib
 import io
 import os
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
 import numpy as np
 from PIL import Image
 
+from depthq.data.camera_labels import LABELS_VERSION, CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.errors import DataError
 
@@ -46,6 +50,7 @@ JPEG_SUBSAMPLING = 2  # Pillow's code for 4:2:0
 JPEG_MAX_MEAN_ABS_ERROR = 2.0  # grey levels, on frames with the simulator's pixel noise
 
 _ARRAYS = ("scans", "bins", "actions", "poses", "times")
+CAMERA = "camera_bins"
 
 
 @dataclass(frozen=True)
@@ -96,19 +101,32 @@ def write_run(path: Path, run: Run, jpeg_quality: int = JPEG_QUALITY) -> FileInf
     """Write `run` atomically to `path` (temporary sibling, fsync, rename) and return its size and hash."""
     if run.images is None:
         raise ValueError(f"run {run.meta.name}: cannot write a run read without images")
-    path = Path(path)
+    frames = [encode_jpeg(image, jpeg_quality) for image in run.images]
+    return _write(Path(path), run, frames, run.images.shape[1:], jpeg_quality)
+
+
+def write_labelled(path: Path, source: RunReader, labels: CameraLabels | None) -> FileInfo:
+    """`source`'s run with camera `labels` (None: without) written to `path` like `write_run`, its JPEG
+    frames copied byte for byte: a run labelled, then written without labels, is its recorded file again."""
+    run = replace(source.run(images=False), camera=labels)
+    frames = [source.jpeg(t) for t in range(len(source))]
+    return _write(Path(path), run, frames, source.image_shape, source.jpeg_quality)
+
+
+def _write(
+    path: Path, run: Run, frames: list[bytes], image_shape: tuple[int, ...], jpeg_quality: int
+) -> FileInfo:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
-        frames = [encode_jpeg(image, jpeg_quality) for image in run.images]
         offsets = np.zeros(len(frames) + 1, dtype=np.int64)
         np.cumsum([len(frame) for frame in frames], out=offsets[1:])
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = FORMAT
             f.attrs["format_version"] = FORMAT_VERSION
-            f.attrs["image_shape"] = np.asarray(run.images.shape[1:], dtype=np.int64)
+            f.attrs["image_shape"] = np.asarray(image_shape, dtype=np.int64)
             f.attrs["jpeg_quality"] = jpeg_quality
             for name in meta_fields():
                 f.attrs[name] = getattr(run.meta, name)
@@ -116,6 +134,11 @@ def write_run(path: Path, run: Run, jpeg_quality: int = JPEG_QUALITY) -> FileInf
             f.create_dataset("jpeg_offsets", data=offsets, track_times=False)
             for name in _ARRAYS:
                 f.create_dataset(name, data=getattr(run, name), track_times=False)
+            if run.camera is not None:
+                camera = f.create_dataset(CAMERA, data=run.camera.bins, track_times=False)
+                camera.attrs["labels_version"] = LABELS_VERSION
+                camera.attrs["labeller"] = run.camera.labeller
+                camera.attrs["labeller_fingerprint"] = run.camera.fingerprint
         with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
         info = FileInfo(sha256=file_sha256(tmp), bytes=tmp.stat().st_size)
@@ -144,6 +167,7 @@ class RunReader:
             raise DataError(f"{self.path}: not a readable HDF5 run file ({err})") from err
         try:
             self.meta, self.image_shape = _read_header(self._file)
+            self.jpeg_quality = int(self._file.attrs["jpeg_quality"])
             self._jpeg = self._file["jpeg"]
             self._offsets = self._file["jpeg_offsets"][()]
             _check_offsets(self._offsets, self.meta.n_frames, self._jpeg.shape)
@@ -184,9 +208,26 @@ class RunReader:
                 [self._decode(buffer[offsets[t] : offsets[t + 1]], t) for t in range(self.meta.n_frames)]
             )
         try:
-            return Run(meta=self.meta, images=decoded, **arrays)
+            return Run(meta=self.meta, images=decoded, camera=self.camera_labels(), **arrays)
         except ValueError as err:
             raise DataError(f"{self.path}: {err}") from err
+
+    def camera_labels(self) -> CameraLabels | None:
+        """The bins estimated from the camera (`depthq label`), or None if the file holds none."""
+        if CAMERA not in self._file:
+            return None
+        try:
+            data = self._file[CAMERA]
+            version = data.attrs.get("labels_version")
+            if version != LABELS_VERSION:
+                raise ValueError(f"camera labels version {version!r}, this code reads {LABELS_VERSION}")
+            attrs = data.attrs
+            labels = CameraLabels(data[()], str(attrs["labeller"]), str(attrs["labeller_fingerprint"]))
+        except (KeyError, OSError, ValueError) as err:
+            raise DataError(f"{self.path}: invalid camera labels ({err})") from err
+        if len(labels.bins) != self.meta.n_frames:
+            raise DataError(f"{self.path}: {len(labels.bins)} camera labels for {self.meta.n_frames} frames")
+        return labels
 
     def _decode(self, data: bytes, t: int) -> np.ndarray:
         try:

@@ -5,6 +5,8 @@ A view is the sample list of one split (or nested subset) for one network:
     kind "depth"  (image_t, a_t, bins[t + 1])   Depth-Q-Net; collision runs lose their last H samples
     kind "coll"   (image_t, a_t, y_t)           Coll-Q-Net; every frame with an action
 
+A Depth-Q-Net view's bins (its targets and the frame's own `current` bins) are the LiDAR's, or with
+`labels="camera"` those a labeller estimated from the camera (`depthq.data.camera_labels`).
 A Depth-Q-Net view with `lookahead` K > 1 has the same samples, each with K actions and K targets
 (a_t … a_{t+K−1}, bins[t + 1] … bins[t + K]) and a mask of the valid steps (`depthq.data.labels`).
 
@@ -27,6 +29,7 @@ from torch.utils.data import Dataset as TorchDataset
 from torch.utils.data import Sampler
 
 from depthq.data import DataConfig
+from depthq.data.camera_labels import LABEL_SOURCES, missing_labels_message
 from depthq.data.labels import (
     coll_sample_indices,
     collision_labels,
@@ -36,6 +39,7 @@ from depthq.data.labels import (
     lookahead_action_indices,
 )
 from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.run import Run
 from depthq.data.runfile import RunReader
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError
@@ -50,8 +54,9 @@ def view_arrays(
     kind: str,
     config: DataConfig | None = None,
     lookahead: int = 1,
+    labels: str = "lidar",
 ) -> dict[str, np.ndarray]:
-    """All samples of a view, run by run.
+    """All samples of a view, run by run; a Depth-Q-Net's bins from `labels` (the LiDAR or the camera).
 
     Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
@@ -65,6 +70,8 @@ def view_arrays(
     """
     if kind not in KINDS:
         raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
+    if labels not in LABEL_SOURCES:
+        raise ConfigError(f"view labels must be one of {LABEL_SOURCES}, got {labels!r}")
     if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
         raise ConfigError(f"view lookahead must be an integer >= 1, got {lookahead!r}")
     if kind == "coll" and lookahead != 1:
@@ -77,23 +84,24 @@ def view_arrays(
     frame_ids, actions, targets, masks, current = [], [], [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
+        bins = _depth_bins(dataset, run, labels) if kind == "depth" else run.bins
         ended = labelled_collision(entry, config.every_run_end)
         if kind == "depth" and lookahead > 1:
             t, frames, mask = depth_lookahead_frames(
                 run.n_frames, ended, lookahead, config.horizon, config.action_lag
             )
-            target = np.where(mask[:, :, None], run.bins[frames], np.float32(np.nan))
+            target = np.where(mask[:, :, None], bins[frames], np.float32(np.nan))
             commands = run.actions[lookahead_action_indices(t, run.n_frames, lookahead, config.action_lag)]
             masks.append(mask)
         elif kind == "depth":
             t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
-            target, commands = run.bins[t + 1], run.actions[t - config.action_lag]
+            target, commands = bins[t + 1], run.actions[t - config.action_lag]
         else:
             t = coll_sample_indices(run.n_frames, config.action_lag)
             target = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
             commands = run.actions[t - config.action_lag]
         frame_ids.append(t)
-        current.append(run.bins[t])
+        current.append(bins[t])
         actions.append(np.clip(commands, -config.action_clip, config.action_clip))
         targets.append(target)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
@@ -108,6 +116,16 @@ def view_arrays(
         "current": np.concatenate(current),
         **({"mask": np.concatenate(masks)} if masks else {}),
     }
+
+
+def _depth_bins(dataset: Dataset, run: Run, labels: str) -> np.ndarray:
+    """The run's bins from `labels`: the LiDAR's, or the camera's (a ConfigError saying how to write them
+    when the run holds none)."""
+    if labels == "lidar":
+        return run.bins
+    if run.camera is None:
+        raise ConfigError(missing_labels_message(dataset.root, run.meta.name))
+    return run.camera.bins
 
 
 def run_then_frame(run_offsets: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -150,9 +168,10 @@ class FrameView(TorchDataset):
         config: DataConfig | None = None,
         max_open_files: int = 64,
         lookahead: int = 1,
+        labels: str = "lidar",
     ) -> None:
         self.dataset = dataset
-        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config, lookahead)
+        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config, lookahead, labels)
         self._entries: dict[int, RunEntry] = {entry.index: entry for entry in dataset.entries(split)}
         self._max_open = max_open_files
         self._readers: OrderedDict[int, RunReader] = OrderedDict()
@@ -189,7 +208,8 @@ class FrameView(TorchDataset):
 
 
 class DepthView(FrameView):
-    """Depth-Q-Net's samples: target = the next frame's 26 depth bins (NaN = invalid bin)."""
+    """Depth-Q-Net's samples: target = the next frame's 26 depth bins (NaN = invalid bin), the LiDAR's or
+    the camera's (`labels`)."""
 
     kind = "depth"
 

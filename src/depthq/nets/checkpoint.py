@@ -74,11 +74,11 @@ _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, t
 _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
 # TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
-# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32; the paper's head,
-# the default until "depth_first" was, and recorded only when it was not), so such a folder still
-# loads and resumes.
+# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32 on LiDAR bins; the
+# paper's head, the default until "depth_first" was, and recorded only when it was not), so such a
+# folder still loads and resumes.
 _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
-                "head_form": "concat"}
+                "head_form": "concat", "labels": "lidar"}
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from depthq.configio import OMIT_DEFAULT
 from depthq.data import DataConfig
+from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import SELECT
@@ -123,6 +124,10 @@ class TrainConfig:
     # flipped left to right (a second feature cache), the action negated, the depth bins reversed; a
     # canyon's mirror image is a canyon, and a turn's effect on it is the mirrored turn's.
     mirror: bool = field(default=False, metadata=OMIT_DEFAULT)
+    # Depth-Q-Net's bins, its targets and a depth_first head's current bins: the LiDAR's ("lidar") or
+    # those a labeller estimated from the camera ("camera", written by `depthq label`;
+    # docs/design.md#camera-labels). Coll-Q-Net's label is the bump: "lidar" only.
+    labels: str = "lidar"
     # Coll-Q-Net's collision label: a bump within this many frames (docs/design.md#labels).
     horizon: int = HORIZON
     # Runs shorter than this many frames are not used (docs/design.md#labels).
@@ -206,7 +211,14 @@ class TrainConfig:
         self._check_snapshots()
         if self.precision not in PRECISIONS:
             raise ConfigError(f"train.precision must be one of {PRECISIONS}, got {self.precision!r}")
-        self.labels()  # checks the label fields
+        if self.labels not in LABEL_SOURCES:
+            raise ConfigError(f"train.labels must be one of {LABEL_SOURCES}, got {self.labels!r}")
+        if self.model == "coll" and self.labels != "lidar":
+            raise ConfigError(
+                f"train.labels {self.labels!r}: Coll-Q-Net learns from the bump, not from depth bins; "
+                "camera labels are Depth-Q-Net's (--model depth), use --labels lidar"
+            )
+        self.data_config()  # checks the label fields
 
     def _check_projection(self) -> None:
         _int_at_least("feature_projection", self.feature_projection, 0)
@@ -250,7 +262,7 @@ class TrainConfig:
         if repeated:
             raise ConfigError(f"train.snapshots repeats epoch(s) {repeated}: {self.snapshots}")
 
-    def labels(self) -> DataConfig:
+    def data_config(self) -> DataConfig:
         """How the dataset's runs become this training's samples."""
         return DataConfig(
             horizon=self.horizon,

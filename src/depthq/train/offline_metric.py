@@ -44,7 +44,8 @@ def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None)
     kind = train["model"]
     train_config = from_dict(TrainConfig, train)
     lookahead = train_config.lookahead
-    arrays = view_arrays(dataset, "val", None, kind=kind, config=train_config.labels(), lookahead=lookahead)
+    # scored against the LiDAR's bins whatever the training's labels: the measured depth is the truth
+    arrays = view_arrays(dataset, "val", None, kind, train_config.data_config(), lookahead)
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
     targets = torch.from_numpy(np.asarray(arrays["target"], np.float32))
     size = int(train["input_size"])

@@ -180,9 +180,9 @@ def _samples(
     config: TrainConfig, dataset: Dataset, progress: bool, device: torch.device
 ) -> tuple[Samples, Samples]:
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
-    data = config.labels()
+    data = config.data_config()
     if TRUNKS[config.trunk].frozen:
-        arrays = {split: view_arrays(dataset, split, n, config.model, data, config.lookahead)
+        arrays = {split: view_arrays(dataset, split, n, config.model, data, config.lookahead, config.labels)
                   for split, n in (("train", config.runs), ("val", None))}
         _check_labels(config, arrays["train"]["target"])
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
@@ -192,11 +192,11 @@ def _samples(
         return (FeatureSamples(arrays["train"], table, "train", following, mirrored),
                 FeatureSamples(arrays["val"], table, "val", following))
     view = DepthView if config.model == "depth" else CollView
-    train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead)
+    train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead, labels=config.labels)
     _check_labels(config, train_view.arrays["target"])
     if progress:
         tqdm.write(f"trunk {config.trunk!r} is trained with the head, on images")
-    val_view = view(dataset, "val", None, data, lookahead=config.lookahead)
+    val_view = view(dataset, "val", None, data, lookahead=config.lookahead, labels=config.labels)
     return (ImageSamples(train_view, config.input_size, progress),
             ImageSamples(val_view, config.input_size, progress))
 
