@@ -1,5 +1,5 @@
 """Checkpoints that describe themselves (a policy needs nothing but the folder), the format's
-versions, and which weights a policy uses (`select`, snapshots). Real MuJoCo runs, real trainings of
+versions, and which weights a policy uses (`weights`, snapshots). Real MuJoCo runs, real trainings of
 a few batches, no mocks."""
 
 from __future__ import annotations
@@ -60,11 +60,11 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert record["dataset"]["env"] == Dataset.open(data).config["env"]  # the manifest's, verbatim
     policy = record["policy"]
     assert (policy["decision_hz"], policy["frame_size"]) == (DEFAULT_DECISION_HZ, [308, 410])
-    assert policy["actions"] == [-1, 0, 1] and policy["selection"] == "farthest_nearest_bin"
+    assert policy["actions"] == [-1, 0, 1] and policy["rule"] == "farthest_nearest_bin"
     assert policy["bins"]["clip"] == 2.0
     # The default Depth-Q-Net: the depth-first head, acting with its final weights; both recorded.
     assert (record["train"]["head_form"], record["head"]["form"]) == ("depth_first", "depth_first")
-    assert record["train"]["select"] == "final" and record["provenance"]["package"] == "depthq"
+    assert record["train"]["weights"] == "final" and record["provenance"]["package"] == "depthq"
 
     b.mkdir()
     shutil.move(a / "ckpt", b / "ckpt")
@@ -116,7 +116,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
 def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: Path) -> None:
     # The paper's head: the only one a checkpoint of an older format can hold.
     out = train(_config(data, epochs=1, head_form="concat"), tmp_path / "run", progress=False)
-    assert read_json(out / "config.json")["train"]["select"] == "best"
+    assert read_json(out / "config.json")["train"]["weights"] == "best"
     record = read_json(out / "config.json")
 
     future = tmp_path / "future"
@@ -129,7 +129,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     # A sweep finds a finished folder trained otherwise than the model of that name now means (the
     # paper's head, before the depth-first head became the default): an error, not a reused model.
     from depthq.report.reproduce import _trained
-    with pytest.raises(ConfigError, match=r"differs in: head_form, select"):
+    with pytest.raises(ConfigError, match=r"differs in: head_form, weights"):
         _trained(_config(data, epochs=1), out)
     assert _trained(_config(data, epochs=1, head_form="concat"), out)
 
@@ -142,11 +142,29 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert read_config(before)["train"] == record["train"]
     assert load_qnet(before)[0].head.config.form == "concat"
 
+    # Version 3 before #33's renames (`train.select`, `policy.selection`): read under the new names,
+    # its policy acts with the weights it chose, it resumes, and a sweep reuses it.
+    renamed = tmp_path / "v3-select"
+    shutil.copytree(out, renamed)
+    old_train = {("select" if k == "weights" else k): v for k, v in record["train"].items()}
+    old_policy = {("selection" if k == "rule" else k): v for k, v in record["policy"].items()}
+    old_names = {**record, "train": {**old_train, "select": "final"}, "policy": old_policy}
+    (renamed / "config.json").write_text(json.dumps(old_names))
+    upgraded = read_config(renamed)
+    assert upgraded["train"] == {**record["train"], "weights": "final"}
+    assert upgraded["policy"] == record["policy"]
+    head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(renamed).net.head.state_dict().items()}
+    assert _equal(head, _tensors(renamed / "last.safetensors"))
+    assert _trained(_config(data, epochs=1, head_form="concat", weights="final"), renamed)
+    resumed = train(_config(data, epochs=2, head_form="concat", weights="final"), renamed, progress=False)
+    assert resumed == renamed
+    assert read_json(renamed / "config.json")["train"]["weights"] == "final"
+
     # Version 2, the layout before `dataset` and `policy`: its rate from its dataset's manifest.
     old = tmp_path / "v2"
     shutil.copytree(out, old)
     v2 = {k: v for k, v in record.items() if k not in ("dataset", "policy")}
-    v2["train"] = {k: v for k, v in record["train"].items() if k not in ("select", "snapshots")}
+    v2["train"] = {k: v for k, v in record["train"].items() if k not in ("weights", "snapshots")}
     (old / "config.json").write_text(json.dumps(
         {**v2, "format_version": 2, "data_fingerprint": record["dataset"]["fingerprint"]}
     ))
@@ -158,22 +176,41 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert read_json(old / "config.json")["format_version"] == 3
 
 
+def test_a_record_with_the_names_before_33_reads_under_the_new_ones(tmp_path: Path) -> None:
+    """`train.select` (the weights a policy uses by default) reads as `train.weights`, `policy.selection`
+    (the rule that picks an action) as `policy.rule`; a record with both names keeps the new one."""
+    from depthq.nets.checkpoint import FORMAT, chosen_weights, policy_record
+
+    policy = {"decision_hz": 4.0, "frame_size": [308, 410], "actions": [-1, 0, 1], "bins": None}
+    for folder, weights, rule in (("old", {"select": "final"}, {"selection": "farthest_nearest_bin"}),
+                                  ("new", {"weights": "final"}, {"rule": "farthest_nearest_bin"})):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "config.json").write_text(json.dumps({
+            "format": FORMAT, "format_version": FORMAT_VERSION, "train": {"model": "depth", **weights},
+            "policy": {**policy, **rule},
+        }))
+        record = read_config(tmp_path / folder)
+        assert "select" not in record["train"] and chosen_weights(record, None) == "final"
+        assert chosen_weights(record, "best") == "best"
+        assert policy_record(record).rule == "farthest_nearest_bin" and "selection" not in record["policy"]
+
+
 @pytest.mark.slow
-def test_select_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path: Path) -> None:
+def test_weights_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path: Path) -> None:
     # Coll-Q-Net at its default rate over-fits this tiny dataset from the first epoch: best ≠ final.
-    out = train(_config(data, model="coll", epochs=3, select="final"), tmp_path / "coll", progress=False)
+    out = train(_config(data, model="coll", epochs=3, weights="final"), tmp_path / "coll", progress=False)
     assert read_json(out / "best.json")["epoch"] < 3 == read_json(out / "last.json")["epoch"]
     best, last = _tensors(out / "best.safetensors"), _tensors(out / "last.safetensors")
     assert not _equal(best, last)
     head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(out).net.head.state_dict().items()}
     assert _equal(head, last)
     head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(out, "best").net.head.state_dict().items()}
-    assert _equal(head, best)  # --which overrides
+    assert _equal(head, best)  # evaluate --weights overrides
 
     config = EvalConfig(canyons=("eval:0",), time_limit_s=1.0)
     summary = evaluate(str(out), tmp_path / "eval", config, workers=1, progress=False, video=False)
     assert summary["policy"]["weights"] == "last" and summary["offline"]["weights"] == "last"
-    assert read_config(out)["train"]["select"] == "final"
+    assert read_config(out)["train"]["weights"] == "final"
 
 
 @pytest.mark.slow
@@ -203,36 +240,37 @@ def test_snapshots_are_kept_loadable_and_survive_a_resume(data: Path, tmp_path: 
         ({"snapshots": (0,)}, "epoch 0 is not one of"),
         ({"snapshots": (5,)}, r"epoch 5 is not one of this training's epochs 1\.\.2"),
         ({"snapshots": (1, 1)}, r"repeats epoch\(s\) \[1\]"),
-        ({"select": "worst"}, "'worst'"),
+        ({"weights": "worst"}, "'worst'"),
     ],
 )
-def test_bad_select_or_snapshots_are_refused_by_name(change: dict, message: str) -> None:
+def test_bad_weights_or_snapshots_are_refused_by_name(change: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         TrainConfig(model="depth", data="data", epochs=2, **change)
     with pytest.raises(ConfigError, match="'epoch:x'"):
-        EvalConfig(which="epoch:x")
+        EvalConfig(weights="epoch:x")
 
 
-def test_a_sweep_varies_select_and_snapshots() -> None:
+def test_a_sweep_varies_weights_and_snapshots() -> None:
     from dataclasses import replace
 
     from depthq.report.presets import get_preset
     from depthq.report.sweep import parse_setting
 
-    assert parse_setting("select=final") == ("select", ("final",))
+    assert parse_setting("weights=final") == parse_setting("select=final") == ("weights", ("final",))
     assert parse_setting("snapshots=40,20+40") == ("snapshots", ((40,), (20, 40)))
-    grid = (parse_setting("select=final"), parse_setting("epochs=3"), parse_setting("snapshots=1+2"))
+    grid = (parse_setting("weights=final"), parse_setting("epochs=3"), parse_setting("snapshots=1+2"))
     sweep = replace(get_preset("smoke"), grid=grid)
     depth, coll = sweep.models()[:2]
     # A setting names a model where it differs from that network's own default: a depth-first
     # Depth-Q-Net selects its final weights unless told, a Coll-Q-Net its best.
     assert (depth.net, coll.net) == ("depth", "coll")
     assert depth.name == "depth_n3_s0_epochs3_snapshots1+2"
+    # The setting was called `select` when sweeps first named folders after it: they keep its name.
     assert coll.name == "coll_n3_s0_selectfinal_epochs3_snapshots1+2"
     for model in (depth, coll):
         config = sweep.train_config(model, "data")
-        assert (config.select, config.epochs, config.snapshots) == ("final", 3, (1, 2))
-    best = replace(sweep, grid=(parse_setting("select=best"),)).models()[0]
+        assert (config.weights, config.epochs, config.snapshots) == ("final", 3, (1, 2))
+    best = replace(sweep, grid=(parse_setting("weights=best"),)).models()[0]
     assert best.name == "depth_n3_s0_selectbest"
     with pytest.raises(ConfigError, match=r"epoch 4 is not one of this training's epochs 1\.\.3"):
         replace(sweep, grid=(*grid[:2], parse_setting("snapshots=4")))

@@ -54,6 +54,23 @@ def test_a_flag_sets_its_field_in_either_spelling() -> None:
     assert (config.every_run_end, config.action_lag) == (False, 1)
 
 
+def test_renamed_flags_keep_their_old_spellings() -> None:
+    """#33 renamed the weights flags (a checkpoint's own: train --weights, was --select; an override of
+    them: evaluate, drive and export --weights, was --which): the old spellings still parse, for one
+    release."""
+    from depthq.cli import build_parser
+    from depthq.flags import config_from_args
+    from depthq.train.config import TrainConfig
+
+    for flag in ("--weights", "--select"):
+        argv = ["train", "--model", "coll", "--data", "d", "--out", "o", flag, "final"]
+        assert config_from_args(TrainConfig, build_parser("train").parse_args(argv)).weights == "final"
+    for verb, argv in (("evaluate", ["heuristic", "--out", "o"]), ("drive", ["--out", "o"]),
+                       ("export", ["ckpt", "--out", "o"])):
+        for flag in ("--weights", "--which"):
+            assert build_parser(verb).parse_args([verb, *argv, flag, "epoch:3"]).weights == "epoch:3"
+
+
 def test_sweep_set_takes_the_flag_names_too() -> None:
     from depthq.report.sweep import parse_setting
 

@@ -121,7 +121,7 @@ def test_export_cli_refuses_bad_input_and_writes_nothing(trained: dict[str, Path
     out = tmp_path / "out"
     assert main(["export", str(tmp_path / "missing"), "--out", str(out)]) == 2
     assert main(["export", str(trained["depth"]), "--out", str(out), "--frame-size", "308"]) == 2
-    assert main(["export", str(trained["depth"]), "--out", str(out), "--which", "worst"]) == 2
+    assert main(["export", str(trained["depth"]), "--out", str(out), "--weights", "worst"]) == 2
     assert not out.exists()
     with pytest.raises(ConfigError, match="no such file"):
         OnnxPolicy(tmp_path / "absent.onnx")

@@ -102,12 +102,12 @@ class FramePolicyGraph(nn.Module):
 def export_onnx(
     checkpoint: Path,
     out: Path,
-    which: str | None = None,
+    weights: str | None = None,
     actions: tuple[float, ...] | None = None,
     frame_size: tuple[int, int] | None = None,
 ) -> Path:
     """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path.
-    `which` weights (None: the checkpoint's choice), `actions` and `frame_size` (None: the
+    `weights` (None: the checkpoint's choice), `actions` and `frame_size` (None: the
     checkpoint's) as in `depthq.nets.checkpoint`."""
     try:
         import onnx  # the optional [deploy] extra, as onnxscript: a missing one is a ConfigError
@@ -117,7 +117,7 @@ def export_onnx(
         raise ConfigError(f'{missing}: pip install "depthq[deploy]"') from err
 
     checkpoint, out = Path(checkpoint), Path(out)
-    net, record = load_qnet(checkpoint, which=which)  # checks the weights' SHA-256
+    net, record = load_qnet(checkpoint, weights=weights)  # checks the weights' SHA-256
     kind = record["head"]["kind"]
     input_size = int(record["input_size"])
     policy = policy_record(record)
@@ -150,7 +150,7 @@ def export_onnx(
         "depthq.kind": kind,
         "depthq.actions": json.dumps([float(a) for a in actions]),
         "depthq.lookahead": str(lookahead),
-        "depthq.selection": RULES[policy.selection],
+        "depthq.selection": RULES[policy.rule],
         "depthq.input_size": str(input_size),
         "depthq.frame_size": json.dumps(list(frame_size)),
         "depthq.config": json.dumps(record, sort_keys=True),

@@ -71,8 +71,8 @@ class EvalConfig:
     canyons: tuple[str, ...] = tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
     time_limit_s: float | None = None  # None: the canyons' family's (45 s for the paper's)
     seed: int = 0  # sensor noise: canyon i uses seed + i
-    # A checkpoint's weights (`depthq.nets.checkpoint.weights_stem`); None: its own choice (`select`).
-    which: str | None = None
+    # A checkpoint's weights (`depthq.nets.checkpoint.weights_stem`); None: its own (`TrainConfig.weights`).
+    weights: str | None = None
     # One decision per camera frame. None: the rate a checkpoint records (else the default).
     decision_hz: float | None = None
     # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
@@ -91,8 +91,8 @@ class EvalConfig:
         _ = self.env  # checks the rate
         if self.time_limit_s is not None and not self.time_limit_s > 0:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
-        if self.which is not None:
-            weights_stem(self.which)
+        if self.weights is not None:
+            weights_stem(self.weights)
         _ = self.selection  # checks rule, discount and switch
 
     @property
@@ -193,7 +193,7 @@ class _EvalWorker:
         torch.set_num_threads(1)
         self.config, self.video = config, video
         self.make_policy = partial(
-            make_policy, policy_spec, seed=config.seed, which=config.which, device=device,
+            make_policy, policy_spec, seed=config.seed, weights=config.weights, device=device,
             selection=config.selection, threads=1,  # an ONNX session's, for the same reasons
         )
         self.policy = self.make_policy()
@@ -280,7 +280,7 @@ def evaluate(
     where = str(resolve_device(device))
     policy_spec = PolicySpec.parse(policy_spec)  # a bad spec fails here, before any worker starts
     description = make_policy(
-        policy_spec, seed=config.seed, which=config.which, device=where, selection=config.selection
+        policy_spec, seed=config.seed, weights=config.weights, device=where, selection=config.selection
     ).describe()
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if policy_spec.checkpoint is not None:  # which every worker loads: the same path on every node
@@ -298,7 +298,7 @@ def evaluate(
     if dataset is not None:
         from depthq.train.offline_metric import offline_metric  # the training stack, as above
 
-        offline = offline_metric(policy_spec.checkpoint, dataset, which=config.which)
+        offline = offline_metric(policy_spec.checkpoint, dataset, weights=config.weights)
     summary = {
         "policy": description,
         "config": to_dict(config),

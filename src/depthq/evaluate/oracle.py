@@ -181,7 +181,7 @@ def _checkpoint_policy(summary: dict[str, Any]) -> Any:
         raise ConfigError(f"predictions need a checkpoint's evaluation; {described.get('policy')!r} is none")
     selection = Selection(config.get("rule", "discounted_nearest_bin"), config.get("discount", 0.9),
                           config.get("switch", False))
-    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), which=described.get("weights"),
+    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), weights=described.get("weights"),
                                       selection=selection)
 
 

@@ -29,11 +29,12 @@ from depthq.cli import main as depthq
 from depthq.configio import read_json
 from depthq.data.labels import HORIZON
 from depthq.experiments.cells import mean_interval
+from depthq.nets.checkpoint import read_config
 from depthq.report.presets import get_preset
 from depthq.report.sweep import Sweep, parse_setting, retarget
 
 SIZES, SEEDS = (200, 500), (0, 1)
-PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "select=final")
+PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "weights=final")
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ RUNGS = (
     Rung("dropout 0.5", ("dropout=0.5",)),
     Rung("pooled feature", ("trunk=efficientnet_lite0",)),
     Rung("10 Hz", hz=10.0),
-    Rung("final weights after 200 epochs", ("epochs=200", "select=final")),
+    Rung("final weights after 200 epochs", ("epochs=200", "weights=final")),
     Rung("all the paper's settings, 10 Hz", PAPER_SETTINGS, hz=10.0, coll_sets=("lr=0.01",)),
 )
 # Beyond the paper, one seed each but the label's horizon (their own sections of docs/ablation.md):
@@ -148,9 +149,8 @@ def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
     if not summary.is_file():
         return None
     s = read_json(summary)["summary"]
-    config = read_json(root / "models" / name / "config.json")
-    which = config.get("train", {}).get("select", "best")
-    weights = read_json(root / "models" / name / ("last.json" if which == "final" else "best.json"))
+    chosen = read_config(root / "models" / name)["train"]["weights"]  # an old record's `select` too
+    weights = read_json(root / "models" / name / ("last.json" if chosen == "final" else "best.json"))
     return {
         "successes": s["successes"],
         "distance": s["distance_to_collision_mean"] if hard else s["distance_mean"],

@@ -161,7 +161,7 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
 
 
 def compare(named: list[tuple[str, Path]]) -> str:
-    """Markdown: one row per (name, evaluation folder), e.g. a checkpoint driven with `--which last`."""
+    """Markdown: one row per (name, evaluation folder), e.g. a checkpoint driven with `--weights last`."""
     lines = ["| policy | evaluation | to first collision (m) | ends reached /20 | collisions | successes |",
              "|---|---|---|---|---|---|"]
     for name, folder in named:

@@ -10,7 +10,7 @@ config.json (format version 3):
     format, format_version   "depthq-checkpoint", 3
     provenance               the package and version that wrote it
     host                     the machine and torch threads that trained it (`depthq.host`)
-    train                    the full TrainConfig (`select`: the weights a policy uses by default;
+    train                    the full TrainConfig (`weights`: the weights a policy uses by default;
                              `snapshots`: epochs whose weights are kept as well; `lookahead`: the
                              steps a Depth-Q-Net predicts, also in `head`;
                              `feature_projection`: the size the feature is projected to, also
@@ -20,7 +20,7 @@ config.json (format version 3):
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
                              manifest records it (null for a robot's recording)
     policy                   `PolicyRecord`: decision rate, camera frame size, candidate actions,
-                             selection rule and depth bins
+                             the rule that picks one (`rule`) and depth bins
 
 Weight files: best.safetensors (lowest validation loss), last.safetensors (the last epoch; after a
 finished training, the final weights), epoch_0040.safetensors (a snapshot). Each carries the
@@ -33,7 +33,9 @@ load, with a warning that they cannot be verified.
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
 Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
-without `precision` a float32 training. A newer version is refused by name.
+without `precision` a float32 training. Fields renamed within version 3 read under their new names:
+`train.select` as `train.weights`, `policy.selection` as `policy.rule`. A newer version is refused
+by name.
 """
 
 from __future__ import annotations
@@ -62,11 +64,11 @@ from depthq.nets.trunk import TRUNKS, build_trunk
 CONFIG = "config.json"
 FORMAT = "depthq-checkpoint"
 # 1: the first layout; 2: every weight file records its SHA-256; 3: config.json describes its
-# policy and dataset (absolute path), and TrainConfig has `select` and `snapshots`.
+# policy and dataset (absolute path), and TrainConfig has `weights` (then `select`) and `snapshots`.
 FORMAT_VERSION = 3
-SELECT = ("best", "final")  # TrainConfig.select
+WEIGHTS = ("best", "final")  # TrainConfig.weights: the weights a checkpoint's policy uses by default
 DIGEST = "sha256"
-_WHICH = {"best": "best", "last": "last", "final": "last"}  # `which` → weight file
+_WEIGHT_FILE = {"best": "best", "last": "last", "final": "last"}  # weights → weight file
 _SNAPSHOT = re.compile(r"epoch:([0-9]+)")
 _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, then the tensor bytes
 # What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
@@ -79,6 +81,8 @@ _LEGACY_DECISION_HZ = 4.0
 # folder still loads and resumes.
 _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
                 "head_form": "concat", "labels": "lidar"}
+# Fields renamed within version 3 (old name → new), as a record written before the rename reads.
+_RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 
 
 @dataclass(frozen=True)
@@ -97,18 +101,18 @@ class PolicyRecord:
     decision_hz: float  # one decision per camera frame, at the rate of its training data
     frame_size: tuple[int, int]  # (height, width) of its training data's camera frames
     actions: tuple[float, ...]  # the candidate actions scored per frame
-    selection: str  # the rule that picks one (`depthq.control.action_selection.RULES`)
+    rule: str  # the rule that picks one (`depthq.control.action_selection.RULES`)
     bins: dict[str, Any] | None  # its data's depth bins (`depthq.sim.sensors.BinConfig`); None: unknown
 
 
-def weights_stem(which: str) -> str:
-    """The weight file `which` names: 'best', 'last' or 'final' (the same file: the weights after
+def weights_stem(weights: str) -> str:
+    """The weight file `weights` names: 'best', 'last' or 'final' (the same file: the weights after
     the last epoch), or 'epoch:N' (a snapshot, `TrainConfig.snapshots`)."""
-    if which in _WHICH:
-        return _WHICH[which]
-    match = _SNAPSHOT.fullmatch(str(which))
+    if weights in _WEIGHT_FILE:
+        return _WEIGHT_FILE[weights]
+    match = _SNAPSHOT.fullmatch(str(weights))
     if match is None or int(match.group(1)) < 1:
-        raise ConfigError(f"checkpoint weights must be 'best', 'last', 'final' or 'epoch:N', got {which!r}")
+        raise ConfigError(f"checkpoint weights must be 'best', 'last', 'final' or 'epoch:N', got {weights!r}")
     return snapshot_stem(int(match.group(1)))
 
 
@@ -116,9 +120,9 @@ def snapshot_stem(epoch: int) -> str:
     return f"epoch_{epoch:04d}"
 
 
-def selected(record: dict[str, Any], which: str | None) -> str:
-    """`which`, or when None the checkpoint's own choice (`TrainConfig.select`)."""
-    return which if which is not None else str(record["train"]["select"])
+def chosen_weights(record: dict[str, Any], weights: str | None) -> str:
+    """`weights`, or when None the checkpoint's own choice (`TrainConfig.weights`)."""
+    return weights if weights is not None else str(record["train"]["weights"])
 
 
 def policy_record(record: dict[str, Any]) -> PolicyRecord:
@@ -218,14 +222,24 @@ def read_config(folder: Path) -> dict[str, Any]:
             f"{path}: checkpoint format version {version!r}, but this depthq reads versions 1 to "
             f"{FORMAT_VERSION}; it was written by a newer depthq: upgrade depthq to read it"
         )
+    record = _renamed(record)
     record = record if version == FORMAT_VERSION else _upgrade(record)
     return {**record, "train": {**_ADDED_TRAIN, **record.get("train", {})}}
+
+
+def _renamed(record: dict[str, Any]) -> dict[str, Any]:
+    """`record` with the fields renamed within version 3 (`_RENAMED`) under their new names."""
+    out = dict(record)
+    for block, names in _RENAMED.items():
+        if isinstance(out.get(block), dict):
+            out[block] = {names.get(k, k): v for k, v in out[block].items()}
+    return out
 
 
 def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
     """A version 1 or 2 record in version 3's shape: the policy it was trained for, its dataset as
     its manifest says (when that is found where the record points, relative paths from here)."""
-    train = {"select": "best", "snapshots": [], **record.get("train", {})}
+    train = {"weights": "best", "snapshots": [], **record.get("train", {})}
     data = Path(str(train.get("data")))
     try:
         env = Dataset.open(data).config.get("env")
@@ -246,7 +260,7 @@ def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
             "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
             "frame_size": [camera["height"], camera["width"]],
             "actions": list(ACTIONS),
-            "selection": RULE_OF.get(kind, ""),
+            "rule": RULE_OF.get(kind, ""),
             "bins": (env or {}).get("bins"),
         },
     }
@@ -268,17 +282,17 @@ def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Pa
 
 
 def load_qnet(
-    folder: Path, which: str | None = None, model: str | None = None, trunk: str | None = None
+    folder: Path, weights: str | None = None, model: str | None = None, trunk: str | None = None
 ) -> tuple[QNet, dict[str, Any]]:
     """The trained network in `folder` in eval mode, and its config.json (`read_config`).
 
-    `which` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.select`).
+    `weights` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.weights`).
     `model` / `trunk`, when given, must be what the folder holds. A missing, incomplete or corrupted
     folder, or one that does not match → an error naming the file.
     """
     folder = Path(folder)
-    if which is not None:
-        weights_stem(which)  # a bad value fails before the folder is looked at
+    if weights is not None:
+        weights_stem(weights)  # a bad value fails before the folder is looked at
     if not folder.is_dir():
         raise ConfigError(f"{folder}: no such checkpoint folder")
     record = read_config(folder)
@@ -289,7 +303,7 @@ def load_qnet(
     for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
         if asked is not None and asked != held:
             raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
-    chosen = selected(record, which)
+    chosen = chosen_weights(record, weights)
     path = folder / f"{weights_stem(chosen)}.safetensors"
     if not path.is_file():
         snapshots = record["train"]["snapshots"]

@@ -16,7 +16,7 @@ from depthq.control.action_selection import ACTIONS, Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import load_qnet, policy_record, selected, weights_stem
+from depthq.nets.checkpoint import chosen_weights, load_qnet, policy_record, weights_stem
 from depthq.nets.heads import QNet, probability
 from depthq.nets.trunk import preprocess
 
@@ -59,15 +59,15 @@ class QNetPolicy(GreedyPolicy):
     def from_checkpoint(
         cls,
         folder: Path,
-        which: str | None = None,
+        weights: str | None = None,
         actions: tuple[float, ...] | None = None,
         device: torch.device | str = "cpu",
         selection: Selection | None = None,
     ) -> QNetPolicy:
-        """The policy of a checkpoint folder: `which` weights (None: the checkpoint's choice) and
+        """The policy of a checkpoint folder: `weights` (None: the checkpoint's choice) and
         `actions` (None: the checkpoint's) as in `depthq.nets.checkpoint`; `selection` (None: the
         default rule) for a Depth-Q-Net."""
-        net, config = load_qnet(Path(folder), which=which)
+        net, config = load_qnet(Path(folder), weights=weights)
         kind = config["train"]["model"]
         return cls(
             net,
@@ -77,7 +77,7 @@ class QNetPolicy(GreedyPolicy):
             name=f"{'DQN' if kind == 'depth' else 'CQN'}:{Path(folder).name}",
             source=str(folder),
             device=device,
-            weights=weights_stem(selected(config, which)),
+            weights=weights_stem(chosen_weights(config, weights)),
             selection=selection,
         )
 

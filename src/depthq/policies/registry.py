@@ -15,13 +15,13 @@ from depthq.policies.spec import PolicySpec
 def make_policy(
     spec: str | PolicySpec,
     seed: int | None = None,
-    which: str | None = None,
+    weights: str | None = None,
     device: str = "cpu",
     selection: Selection | None = None,
     threads: int | None = None,
 ) -> Policy:
     """The policy `spec` names (a string is parsed: `PolicySpec.parse`). A checkpoint's Q-net takes
-    `which` weights (`depthq.nets.checkpoint.weights_stem`, None: the checkpoint's choice) and runs on
+    `weights` (`depthq.nets.checkpoint.weights_stem`, None: the checkpoint's choice) and runs on
     torch `device`. `selection`: how a Depth-Q-Net scores its candidates (None: the default rule;
     docs/design.md#lookahead-selection). `threads`: an ONNX session's (torch's are the process's,
     `torch.set_num_threads`)."""
@@ -32,4 +32,4 @@ def make_policy(
         return OUPolicy(seed=seed)
     if spec.kind == "onnx":
         return OnnxPolicy(spec.path, threads=threads, selection=selection)
-    return QNetPolicy.from_checkpoint(spec.path, which=which, device=device, selection=selection)
+    return QNetPolicy.from_checkpoint(spec.path, weights=weights, device=device, selection=selection)

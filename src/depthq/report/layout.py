@@ -13,12 +13,17 @@ from __future__ import annotations
 from typing import Any
 
 NETS = ("depth", "coll")
+# Settings renamed since sweeps named model folders after them: the new name → the name folders keep,
+# so a sweep finds and reuses the folders trained before the rename (`--set weights=final` is
+# depth_n200_s0_selectfinal, as `--set select=final` was).
+FOLDER_KEYS = {"weights": "select"}
 
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:
     """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant (a tuple value's items
-    joined by '+': depth_n200_s1_snapshots40+80)."""
-    return f"{net}_n{runs}_s{seed}" + "".join(f"_{k}{setting_text(v)}" for k, v in variant)
+    joined by '+': depth_n200_s1_snapshots40+80; a renamed setting under its old name, `FOLDER_KEYS`)."""
+    settings = "".join(f"_{FOLDER_KEYS.get(k, k)}{setting_text(v)}" for k, v in variant)
+    return f"{net}_n{runs}_s{seed}{settings}"
 
 
 def setting_text(value: Any) -> str:

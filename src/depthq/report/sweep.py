@@ -17,7 +17,7 @@ from typing import Any
 
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
-from depthq.report.layout import NETS, model_name, setting_text
+from depthq.report.layout import FOLDER_KEYS, NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train.config import TrainConfig
@@ -29,6 +29,8 @@ NOT_IN_GRID = ("model", "data", "runs", "seed")
 # is the variant without them, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
 # variant's row shows it).
 DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap")
+# Old spellings of renamed settings, accepted by --set for one release: 'select' → 'weights'.
+RENAMED_SETTINGS = {old: new for new, old in FOLDER_KEYS.items()}
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 
@@ -186,6 +188,7 @@ def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     tuple field takes each value as items joined by '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
     key, sep, raw = text.partition("=")
     key = key.strip().replace("-", "_")  # the flag's spelling (depthq train --action-scale) or the field's
+    key = RENAMED_SETTINGS.get(key, key)
     defaults = {f.name: f.default for f in fields(TrainConfig)}
     if not sep or not raw:
         raise ConfigError(f"--set takes FIELD=VALUE[,VALUE…], got {text!r}")

@@ -26,7 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--hz", type=float, default=None,
                    help="decisions (camera frames) per second [a checkpoint's: the one it records]")
-    p.add_argument("--which", default=None, help="checkpoint weights: best, last or epoch:N [its select]")
+    p.add_argument("--weights", "--which", dest="weights", default=None,
+                   help="checkpoint weights: best, last or epoch:N [the checkpoint's own, train --weights]; "
+                   "--which: its old name")
     p.add_argument("--frames", type=int, default=4, help="camera frames to save, evenly spaced")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON line")
 
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     device = str(resolve_device(args.device))
     spec = PolicySpec.parse(args.policy)
-    policy = make_policy(spec, seed=args.seed, which=args.which, device=device)
+    policy = make_policy(spec, seed=args.seed, weights=args.weights, device=device)
     world = WorldConfig(decision_hz=decision_rate(spec) if args.hz is None else args.hz)
     limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
     env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))

@@ -12,10 +12,10 @@ from depthq.parallel import add_executor_arguments, executor_from
 
 # EvalConfig's fields keep the flags they had before they were made from it; --canyons stays a
 # canyon set ('eval:0-4'), parsed by the verb.
-_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",)}
+_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",)}
 _HELP = {
     "time_limit_s": "seconds per run",
-    "which": "best, last (= final) or epoch:N",
+    "weights": "best, last (= final) or epoch:N (--which: its old name)",
     "decision_hz": "decisions per second",
     "rule": "discounted_nearest_bin or farthest_nearest_bin",
     "discount": "the step weight's base of discounted_nearest_bin",

@@ -19,8 +19,9 @@ def _frame_size(text: str) -> tuple[int, int]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoint", type=Path, help="a checkpoint folder written by `depthq train`")
     p.add_argument("--out", type=Path, required=True, help="folder for <checkpoint name>.onnx")
-    p.add_argument("--which", default=None,
-                   help="best (lowest validation loss), last (= final) or epoch:N [the checkpoint's select]")
+    p.add_argument("--weights", "--which", dest="weights", default=None,
+                   help="best (lowest validation loss), last (= final) or epoch:N [the checkpoint's own, "
+                   "train --weights]; --which: its old name")
     p.add_argument("--frame-size", default=None,
                    help="camera frame the graph takes, HEIGHTxWIDTH [the checkpoint's: its data's frames]")
 
@@ -29,6 +30,6 @@ def run(args: argparse.Namespace) -> int:
     from depthq.deploy.onnx_export import export_onnx  # torch: when this verb runs
 
     frame_size = None if args.frame_size is None else _frame_size(args.frame_size)
-    path = export_onnx(args.checkpoint, args.out, which=args.which, frame_size=frame_size)
+    path = export_onnx(args.checkpoint, args.out, weights=args.weights, frame_size=frame_size)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB); drive it with the policy onnx:{path}")
     return 0

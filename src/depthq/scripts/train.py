@@ -23,17 +23,21 @@ _HELP = {
 }
 
 
+# Older spellings of TrainConfig's flags, accepted for one release.
+_ALIASES = {"weights": ("--select",)}
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="checkpoint folder (created, or resumed)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_config_arguments(p, TrainConfig, more_help=_HELP)
+    add_config_arguments(p, TrainConfig, aliases=_ALIASES, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.train.trainer import train  # the data views and the trainer: when this verb runs
 
-    config = config_from_args(TrainConfig, args)  # every field from its flag (select, snapshots, ...)
+    config = config_from_args(TrainConfig, args)  # every field from its flag (weights, snapshots, ...)
     out = train(config, args.out, progress=not args.no_progress, device=args.device)
     best, last = read_json(out / "best.json"), read_json(out / "last.json")
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "

@@ -10,7 +10,7 @@ from depthq.data import DataConfig
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import SELECT
+from depthq.nets.checkpoint import WEIGHTS
 from depthq.nets.heads import HEAD_FORMS, HEAD_KINDS, HeadConfig, default_form
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
@@ -27,9 +27,9 @@ DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # within 8 % of the best of 60 for Depth-Q-Net (0.151 vs 0.139 at 50) and 10 % for Coll-Q-Net (0.058
 # vs 0.053); best.safetensors keeps the best epoch. 40 epochs ≈ 80 s per model on 2 CPU cores.
 DEFAULT_EPOCHS = 40
-# The weights a head form's checkpoint acts with by default (`TrainConfig.select`): the depth-first
+# The weights a head form's checkpoint acts with by default (`TrainConfig.weights`): the depth-first
 # head's best-validation epoch is a noisy pick of its summed perception and dynamics losses.
-DEFAULT_SELECT = {"depth_first": "final"}
+DEFAULT_WEIGHTS = {"depth_first": "final"}
 # The forward pass's arithmetic in training and validation (docs/benchmarks.md#precision).
 PRECISIONS = ("fp32", "bf16")
 
@@ -138,12 +138,12 @@ class TrainConfig:
     action_clip: float = 1.0
     # 1: label frame t with the command of frame t-1 (the original recorder, likely).
     action_lag: int = 0
-    # The weights this checkpoint's policy uses unless told (--which): best (lowest validation loss)
-    # or final (after the last epoch, as the original evaluated them); none: final for a depth_first
-    # head, else best. The head form's choice was made on `val` canyons
+    # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
+    # validation loss) or final (after the last epoch, as the original evaluated them); none: final
+    # for a depth_first head, else best. The head form's choice was made on `val` canyons
     # (docs/design.md#weights). Training is the same either way.
-    select: str | None = None
-    # Epochs whose weights are kept as well (epoch_0040.safetensors, `--which epoch:40`), so that one
+    weights: str | None = None
+    # Epochs whose weights are kept as well (epoch_0040.safetensors, `--weights epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
     # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
@@ -156,8 +156,8 @@ class TrainConfig:
         # Defaults that depend on other fields are resolved here, so a stored config names its choice.
         if self.head_form is None and isinstance(self.lookahead, int):
             object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
-        if self.select is None:
-            object.__setattr__(self, "select", DEFAULT_SELECT.get(str(self.head_form), "best"))
+        if self.weights is None:
+            object.__setattr__(self, "weights", DEFAULT_WEIGHTS.get(str(self.head_form), "best"))
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
         if self.runs is not None:
@@ -206,8 +206,8 @@ class TrainConfig:
                               f"but trunk {self.trunk!r} is trained with the head")
         if self.depth_loss not in DEPTH_LOSSES:
             raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
-        if self.select not in SELECT:
-            raise ConfigError(f"train.select must be one of {SELECT}, got {self.select!r}")
+        if self.weights not in WEIGHTS:
+            raise ConfigError(f"train.weights must be one of {WEIGHTS}, got {self.weights!r}")
         self._check_snapshots()
         if self.precision not in PRECISIONS:
             raise ConfigError(f"train.precision must be one of {PRECISIONS}, got {self.precision!r}")

@@ -26,7 +26,7 @@ from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError, DataError
-from depthq.nets.checkpoint import dataset_record, load_qnet, selected, weights_stem
+from depthq.nets.checkpoint import chosen_weights, dataset_record, load_qnet, weights_stem
 from depthq.nets.trunk import preprocess
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
@@ -36,10 +36,10 @@ METRICS = {"depth": "abs_diff", "coll": "cross_entropy"}
 
 
 @torch.inference_mode()
-def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None) -> dict[str, Any]:
+def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = None) -> dict[str, Any]:
     """The metric over the validation split of `dataset`, the one the checkpoint was trained on
     (`training_data`)."""
-    net, config = load_qnet(Path(checkpoint), which=which)
+    net, config = load_qnet(Path(checkpoint), weights=weights)
     train = config["train"]
     kind = train["model"]
     train_config = from_dict(TrainConfig, train)
@@ -54,14 +54,14 @@ def offline_metric(checkpoint: Path, dataset: Dataset, which: str | None = None)
     else:  # the trunk was trained with the head: run it on the frames themselves
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
-    weights = weights_stem(selected(config, which))
+    stem = weights_stem(chosen_weights(config, weights))
     if lookahead == 1:
         loss, _ = loss_function(train_config)(outputs, targets)
-        return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": weights}
+        return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": stem}
     one_step = loss_function(replace(train_config, lookahead=1))
     valid = torch.from_numpy(arrays["mask"])
     steps = [float(one_step(outputs[valid[:, k], k], targets[valid[:, k], k])[0]) for k in range(lookahead)]
-    return {"metric": METRICS[kind], "value": steps[0], "samples": len(targets), "weights": weights,
+    return {"metric": METRICS[kind], "value": steps[0], "samples": len(targets), "weights": stem,
             "steps": steps}
 
 
