@@ -19,6 +19,8 @@ VERBS: dict[str, str] = {
     "bench": "bench",
     "collect": "collect",
     "dataset": "dataset",
+    "labeller": "labeller",
+    "label": "label",
     "train": "train",
     "evaluate": "evaluate",
     "reproduce": "reproduce",

@@ -1,4 +1,5 @@
-"""The paper's Table II for a dataset: runs and samples of every nested subset, from the manifest alone."""
+"""The paper's Table II for a dataset: runs and samples of every nested subset, from the manifest alone;
+and, where runs hold camera labels beside a LiDAR, the labels' error against it (from the run files)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ from depthq.data.labels import coll_sample_indices, depth_sample_indices, labell
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import SPLITS
 from depthq.data.subsets import usable_runs
+
+# LiDAR distance bands (m) of the camera labels' error; the last one holds the clip (2 m: nothing near).
+ERROR_BANDS = ((0.0, 0.5), (0.5, 1.0), (1.0, 2.0))
 
 # The paper's Table II: runs → (samples, samples without collision); ≈ 47 frames per run.
 PAPER_TABLE2 = {
@@ -77,6 +81,50 @@ def dataset_stats(dataset: Dataset, config: DataConfig) -> dict[str, Any]:
     }
 
 
+def label_error(dataset: Dataset) -> dict[str, Any] | None:
+    """The camera labels' absolute error (m) against the LiDAR's bins, per split: per bin (left to right),
+    per LiDAR distance band (ERROR_BANDS), and of each frame's nearest bin (the one that decides);
+    only bins both measured and estimated count (a recording without a LiDAR has none). None when no
+    run holds camera labels."""
+    labellers, out = set(), {}
+    for split in SPLITS:
+        pairs = []
+        for entry in dataset.entries(split):
+            run = dataset.read_run(entry, images=False)
+            if run.camera is not None:
+                labellers.add((run.camera.labeller, run.camera.fingerprint))
+                pairs.append((run.bins, run.camera.bins))
+        if pairs:
+            out[split] = _errors(np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]),
+                                 len(pairs))
+    if not labellers:
+        return None
+    return {"labellers": [{"name": n, "fingerprint": f} for n, f in sorted(labellers)], "splits": out}
+
+
+def _errors(lidar: np.ndarray, camera: np.ndarray, runs: int) -> dict[str, Any]:
+    valid = np.isfinite(lidar) & np.isfinite(camera)
+    error = np.where(valid, np.abs(camera - lidar), np.nan)
+    bands = []
+    for low, high in ERROR_BANDS:
+        inside = valid & (lidar >= low) & ((lidar < high) if high < ERROR_BANDS[-1][1] else (lidar <= high))
+        bands.append({"band": f"{low:g}–{high:g}", "bins": int(inside.sum()), **_summary(error[inside])})
+    frames = valid.any(axis=1)  # frames with a measured and estimated bin: their nearest ones
+    nearest = np.abs(np.nanmin(np.where(valid, camera, np.nan)[frames], axis=1)
+                     - np.nanmin(np.where(valid, lidar, np.nan)[frames], axis=1))
+    with np.errstate(invalid="ignore"):
+        per_bin = np.nanmean(error, axis=0) if valid.any() else np.full(lidar.shape[1], np.nan)
+    return {"runs": runs, "frames": int(frames.sum()), "per_bin": [round(float(e), 4) for e in per_bin],
+            "bands": bands, "nearest": _summary(nearest)}
+
+
+def _summary(errors: np.ndarray) -> dict[str, float | None]:
+    """Median and mean of absolute errors (None for none)."""
+    if not len(errors):
+        return {"median": None, "mean": None}
+    return {"median": round(float(np.median(errors)), 4), "mean": round(float(np.mean(errors)), 4)}
+
+
 def format_stats(stats: dict[str, Any]) -> str:
     """Table II as text, with the counts it is based on."""
     collected, usable_counts = stats["collected"], stats["usable"]
@@ -101,3 +149,25 @@ def format_stats(stats: dict[str, Any]) -> str:
             f"{row['mean_run_length']:>12.1f} {row['collision_fraction']:>8.1%} {theirs}"
         )
     return "\n".join(lines)
+
+
+def format_label_error(report: dict[str, Any]) -> list[str]:
+    """`label_error` as text lines: median [mean] absolute error in metres."""
+    def cell(summary: dict[str, float | None]) -> str:
+        return "—" if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
+
+    who = ", ".join(f"{lab['name']} {lab['fingerprint'][:12]}…" for lab in report["labellers"])
+    first = next(iter(report["splits"].values()))
+    bands = [b["band"] for b in first["bands"]]
+    lines = [
+        f"camera labels ({who}) against the LiDAR: absolute error, median [mean] m",
+        f"{'split':>6} {'runs':>5} {'frames':>7} {'nearest bin':>14} "
+        + " ".join(f"{band + ' m':>14}" for band in bands),
+    ]
+    for split, row in report["splits"].items():
+        lines.append(f"{split:>6} {row['runs']:>5} {row['frames']:>7} {cell(row['nearest']):>14} "
+                     + " ".join(f"{cell(b):>14}" for b in row["bands"]))
+    for split, row in report["splits"].items():
+        lines.append(f"{split:>6} per bin, left to right (mean): "
+                     + " ".join(f"{e:.2f}" for e in row["per_bin"]))
+    return lines

@@ -1,4 +1,4 @@
-"""Inspect a dataset folder: the paper's Table II (`stats`) or a full integrity check (`verify`)."""
+"""Inspect a dataset folder: Table II and the camera labels' error (`stats`), or its integrity (`verify`)."""
 
 from __future__ import annotations
 
@@ -9,14 +9,15 @@ from pathlib import Path
 
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
-from depthq.data.stats import dataset_stats, format_stats
+from depthq.data.stats import dataset_stats, format_label_error, format_stats, label_error
 
 _DEFAULTS = DataConfig()
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
-    stats = actions.add_parser("stats", help="runs and samples of every nested subset (Table II)")
+    stats = actions.add_parser("stats", help="runs and samples of every nested subset (Table II), and the "
+                               "camera labels' error against the LiDAR where runs hold both")
     stats.add_argument("dir", type=Path, help="dataset folder")
     stats.add_argument("--json", action="store_true", help="print JSON instead of a table")
     stats.add_argument("--horizon", type=int, default=_DEFAULTS.horizon, help="collision label horizon H")
@@ -31,7 +32,11 @@ def run(args: argparse.Namespace) -> int:
     dataset = Dataset.open(args.dir)
     if args.action == "stats":
         stats = dataset_stats(dataset, DataConfig(horizon=args.horizon, min_frames=args.min_frames))
-        print(json.dumps(stats, indent=2) if args.json else format_stats(stats))
+        labels = label_error(dataset)
+        if args.json:
+            print(json.dumps({**stats, **({"camera_labels": labels} if labels else {})}, indent=2))
+        else:
+            print("\n".join([format_stats(stats), *(["", *format_label_error(labels)] if labels else [])]))
         return 0
     problems = dataset.verify(progress=True)
     for problem in problems:

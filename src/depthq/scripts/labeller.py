@@ -1,0 +1,34 @@
+"""Train a camera labeller (a frame → its 26 depth bins) on another canyon family's LiDAR (`depthq label`)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from depthq.configio import read_json
+from depthq.flags import add_config_arguments, config_from_args
+from depthq.nets.device import DEVICE_HELP
+
+_HELP = {"data": "dataset folder of ANOTHER canyon family than those to label (its LiDAR is the target)"}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from depthq.train.labeller import LabellerConfig  # torch: when this verb's flags are built
+
+    p.add_argument("--out", type=Path, required=True, help="labeller folder (created; a finished one kept)")
+    p.add_argument("--device", default="auto", help=DEVICE_HELP)
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_config_arguments(p, LabellerConfig, more_help=_HELP)
+
+
+def run(args: argparse.Namespace) -> int:
+    from depthq.train.labeller import CONFIG, LabellerConfig, train_labeller
+
+    config = config_from_args(LabellerConfig, args)
+    out = train_labeller(config, args.out, progress=not args.no_progress, device=args.device)
+    record = read_json(out / CONFIG)
+    print(f"labeller: {out} ({record['name']}, fingerprint {record['fingerprint'][:16]}…), learnt from the "
+          f"{record['source']['family']!r} family's LiDAR; training loss {record['losses'][0]:.3f} → "
+          f"{record['losses'][-1]:.3f} m, val L1 {record['val_l1']:.3f} m")
+    print(f"label another family's dataset with: depthq label DATA --from camera --labeller {out}")
+    return 0

@@ -1,0 +1,295 @@
+"""The camera labeller: depth bins estimated from one frame, learnt on another canyon family's LiDAR.
+
+The stand-in for an off-the-shelf monocular depth model (issue #32, docs/design.md#camera-labels): the
+frozen default trunk's feature → FC hidden + ReLU → FC 26, the read-out of the depth-first head's
+`perceive`, trained with an L1 loss on the current LiDAR bins of a dataset of ANOTHER canyon family
+(an invalid bin as the 2 m clip, as that head's perception target). It used a depth sensor, elsewhere:
+no depth of the canyons it labels. Applied to a dataset (`depthq label`), it writes every frame's 26
+bins, clipped to [0, 2] m, into the run files (`depthq.data.camera_labels`).
+
+Its folder (written by `depthq labeller`):
+
+    config.json           format "depthq-labeller" 1, provenance, the LabellerConfig, name, fingerprint,
+                          trunk, input_size, n_bins, bins (the geometry its bins follow), source (the
+                          dataset it learnt from: path, fingerprint, family), losses (the training loss
+                          over each tenth of the steps), val_l1 (on the source's val runs); written last
+    weights.safetensors   the read-out's weights, with the SHA-256 of their bytes (never a pickle)
+
+Its fingerprint, the SHA-256 of its weights' digest and of what fixes its output (trunk, input size,
+bins), is what a run file's labels record: equal fingerprints, equal labels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm import tqdm
+
+from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
+from depthq.data.camera_labels import CameraLabels
+from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.runfile import RunReader
+from depthq.data.views import run_then_frame
+from depthq.errors import ConfigError, DataError
+from depthq.nets.checkpoint import DIGEST, read_weights, weights_bytes
+from depthq.nets.device import resolve_device
+from depthq.nets.losses import DEPTH_CLIP
+from depthq.nets.optim import make_optimizer
+from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
+from depthq.parallel import cores
+from depthq.sim.canyon import PAPER
+from depthq.sim.sensors import BinConfig
+from depthq.train.features import BATCH, FeatureTable, load_features
+
+FORMAT = "depthq-labeller"
+FORMAT_VERSION = 1
+CONFIG = "config.json"
+WEIGHTS = "weights.safetensors"
+NAME = "perception"
+LOG_BLOCKS = 10  # the training loss is recorded as the mean over each tenth of the steps
+
+
+@dataclass(frozen=True)
+class LabellerConfig:
+    """One labeller training: the frozen trunk's feature → the current LiDAR bins of `data`."""
+
+    # The dataset whose LiDAR teaches it: another canyon family's than the datasets it will label.
+    data: str
+    # A frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
+    trunk: str = DEFAULT_TRUNK
+    # Side of the square image the trunk sees, in pixels.
+    input_size: int = INPUT_SIZE
+    # Width of the read-out's hidden layer (the depth-first head's).
+    hidden: int = 4096
+    # Adadelta steps, each on a batch drawn "a random run, then a random frame of it" (a training's 40 × 100).
+    steps: int = 4000
+    # Frames per step.
+    batch_size: int = 64
+    # Adadelta's learning rate (the heads').
+    lr: float = 0.1
+    # Seeds the initialisation and the batches.
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.data, str) or not self.data:
+            raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
+        spec = TRUNKS.get(self.trunk)
+        if spec is None or not spec.frozen:
+            frozen = sorted(name for name, s in TRUNKS.items() if s.frozen)
+            raise ConfigError(f"labeller.trunk must be a frozen trunk, one of {frozen}, got {self.trunk!r}")
+        for name, low in (("input_size", 1), ("hidden", 1), ("steps", 1), ("batch_size", 1), ("seed", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ConfigError(f"labeller.{name} must be an integer >= {low}, got {value!r}")
+        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) or not 0 < self.lr < np.inf:
+            raise ConfigError(f"labeller.lr must be a finite number > 0, got {self.lr!r}")
+
+
+class Perception(nn.Module):
+    """Feature (B, D) → bins (B, n_bins), unbounded: the depth-first head's perception read-out."""
+
+    def __init__(self, feature_dim: int, hidden: int, n_bins: int) -> None:
+        super().__init__()
+        self.hidden = nn.Linear(feature_dim, hidden)
+        self.current = nn.Linear(hidden, n_bins)
+        for layer in (self.hidden, self.current):  # Glorot, as every head
+            nn.init.xavier_uniform_(layer.weight)
+            nn.init.zeros_(layer.bias)
+
+    def forward(self, feature: torch.Tensor) -> torch.Tensor:
+        return self.current(torch.relu(self.hidden(feature)))
+
+
+@dataclass(frozen=True, eq=False)
+class Labeller:
+    """A trained labeller ready to label frames (`load_labeller`)."""
+
+    net: Perception
+    trunk: Trunk
+    input_size: int
+    fingerprint: str
+    record: dict[str, Any]  # its config.json
+
+    @torch.inference_mode()
+    def estimate(self, frames: np.ndarray) -> np.ndarray:
+        """uint8 frames (N, H, W, 3) → their bins (N, n_bins) float32, clipped to [0, DEPTH_CLIP] m."""
+        bins = [self.net(self.trunk(preprocess(frames[i : i + BATCH], self.input_size)))
+                for i in range(0, len(frames), BATCH)]
+        return torch.cat(bins).clamp(0.0, DEPTH_CLIP).numpy().astype(np.float32)
+
+    def label(self, reader: RunReader) -> CameraLabels:
+        """A run's camera labels: every stored frame's estimated bins."""
+        return CameraLabels(self.estimate(reader.run(images=True).images), NAME, self.fingerprint)
+
+
+def family(dataset: Dataset) -> str | None:
+    """The canyon family a dataset drove in (its manifest's env.world); None for a robot's recording."""
+    env = dataset.config.get("env")
+    return None if env is None else env["world"].get("family", PAPER)
+
+
+def bin_geometry(dataset: Dataset) -> dict[str, Any]:
+    """The depth bins' config of a dataset (a robot's recording is resampled to the default's)."""
+    env = dataset.config.get("env")
+    return to_dict(BinConfig()) if env is None else env["bins"]
+
+
+def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, device: str = "auto") -> Path:
+    """Train `config` into the folder `out` and return it; a folder holding this labeller is returned as
+    it is, one holding anything else is a ConfigError (nothing is written before the data is checked).
+    `device`: see `depthq.nets.device`."""
+    out, device = Path(out), resolve_device(device)
+    if (out / CONFIG).is_file():
+        record = read_json(out / CONFIG)
+        if record.get("config") != to_dict(config):
+            raise ConfigError(f"--out {out} holds another labeller (config.json differs); use another folder")
+        return out
+    if out.exists() and any(out.iterdir()):
+        raise ConfigError(f"--out {out}: exists, is not empty and holds no labeller ({CONFIG} missing)")
+    dataset = Dataset.open(Path(config.data))
+    for split in ("train", "val"):
+        if not dataset.entries(split):
+            raise ConfigError(f"{dataset.root} has no {split} runs to train a labeller on")
+    table = load_features(dataset, config.trunk, config.input_size, progress, device)
+    train, val = (_frames(dataset, table, split) for split in ("train", "val"))
+    features = {split: torch.from_numpy(table.features[rows]).float()
+                for split, (rows, _, _) in (("train", train), ("val", val))}
+    torch.set_num_threads(cores())
+    torch.manual_seed(config.seed)
+    net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, train[1].shape[1]).to(device)
+    optimizer = make_optimizer(net, config.lr, weight_decay=0.0)
+    rng = np.random.default_rng(config.seed)
+    losses = []
+    for _ in tqdm(range(config.steps), desc="train labeller", unit="step", disable=not progress):
+        idx = torch.from_numpy(run_then_frame(train[2], config.batch_size, rng))
+        loss = (net(features["train"][idx].to(device)) - train[1][idx].to(device)).abs().mean()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    with torch.no_grad():
+        val_l1 = (net(features["val"].to(device)).cpu() - val[1]).abs().mean().item()
+    tensors = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
+    blob = weights_bytes(tensors)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / WEIGHTS, blob)
+    identity = _identity(config.trunk, config.input_size, bin_geometry(dataset))
+    blocks = np.array_split(np.asarray(losses), min(LOG_BLOCKS, len(losses)))
+    write_json(out / CONFIG, {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "provenance": provenance(),
+        "config": to_dict(config), "name": NAME, **identity, "n_bins": int(train[1].shape[1]),
+        "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
+        "source": {"path": str(dataset.root.resolve()), "fingerprint": dataset.fingerprint(),
+                   "family": family(dataset)},
+        "losses": [round(float(b.mean()), 6) for b in blocks], "val_l1": round(val_l1, 6),
+    })
+    return out
+
+
+def load_labeller(folder: Path) -> Labeller:
+    """The labeller in `folder`; a missing or foreign folder, or weights that fail their SHA-256, is an
+    error naming the file."""
+    folder = Path(folder)
+    path = folder / CONFIG
+    if not path.is_file():
+        raise ConfigError(f"--labeller {folder}: not a labeller folder (no {CONFIG}; make one with "
+                          "`depthq labeller --data OTHER_DATASET --out FOLDER`)")
+    record = read_json(path)
+    if not isinstance(record, dict) or record.get("format") != FORMAT:
+        raise ConfigError(f"{path}: not a {FORMAT} config")
+    if record.get("format_version") != FORMAT_VERSION:
+        raise ConfigError(f"{path}: labeller format version {record.get('format_version')!r}, this depthq "
+                          f"reads {FORMAT_VERSION}")
+    config = from_dict(LabellerConfig, record["config"])
+    tensors, metadata = read_weights(folder / WEIGHTS)
+    net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
+    try:
+        net.load_state_dict(tensors)
+    except RuntimeError as err:
+        raise ConfigError(f"{folder / WEIGHTS}: weights do not fit its {CONFIG} ({err})") from err
+    identity = _identity(config.trunk, config.input_size, record["bins"])
+    return Labeller(net.eval(), build_trunk(config.trunk), config.input_size,
+                    _fingerprint(identity, metadata[DIGEST]), record)
+
+
+def _frames(dataset: Dataset, table: FeatureTable, split: str) -> tuple[np.ndarray, torch.Tensor, np.ndarray]:
+    """Every frame of a split's runs: feature-cache rows (F,), current LiDAR bins (F, n_bins) with an
+    invalid bin as the clip, and the runs' offsets (R + 1,) for `run_then_frame`."""
+    entries = dataset.entries(split)
+    rows = np.concatenate([table.runs[e.name][0] + np.arange(e.n_frames) for e in entries])
+    bins = np.concatenate([dataset.read_run(e, images=False).bins for e in entries])
+    offsets = np.concatenate([[0], np.cumsum([e.n_frames for e in entries])])
+    return rows, torch.from_numpy(np.nan_to_num(bins, nan=DEPTH_CLIP)), offsets
+
+
+def _identity(trunk: str, input_size: int, bins: dict[str, Any]) -> dict[str, Any]:
+    """What fixes a labeller's output besides its weights."""
+    return {"trunk": trunk, "input_size": input_size, "bins": bins}
+
+
+def _fingerprint(identity: dict[str, Any], weights_digest: str) -> str:
+    text = json.dumps({**identity, "weights": weights_digest}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def check_applicable(labeller: Labeller, dataset: Dataset) -> None:
+    """ConfigError unless `labeller` may label `dataset`: bins of the same geometry, and learnt on another
+    canyon family (no depth of the canyons it labels; a robot's recording is no canyon family)."""
+    record = labeller.record
+    if record["bins"] != bin_geometry(dataset):
+        raise ConfigError(f"labeller bins {record['bins']} differ from {dataset.root}'s bins "
+                          f"{bin_geometry(dataset)}: its labels would not be in this dataset's geometry")
+    source, target = record["source"]["family"], family(dataset)
+    if source == target:
+        raise ConfigError(
+            f"the labeller learnt from the {source!r} family's LiDAR ({record['source']['path']}), and "
+            f"{dataset.root} is of the {target!r} family too: train one on another family's dataset, so "
+            "that no depth of these canyons goes into their labels"
+        )
+
+
+def label_dataset(dataset: Dataset, labeller: Labeller, replace: bool = False, progress: bool = True
+                  ) -> tuple[int, int]:
+    """Write `labeller`'s camera labels into every run of `dataset` that lacks them; returns (runs
+    written, runs that held them already). Every check runs before the first run is written: a labeller
+    that may not label this dataset (`check_applicable`), a run labelled by another labeller (unless
+    `replace`), a file that fails its manifest check. A run file left by a labelling stopped between
+    the file's rename and the manifest's is taken as it is (`Dataset.adopt_labelled`)."""
+    check_applicable(labeller, dataset)
+    pending, kept = [], 0
+    for entry in dataset.entries():
+        try:
+            held = _held(dataset, entry)
+        except DataError:
+            adopted = dataset.adopt_labelled(entry)
+            if adopted is None:
+                raise
+            held = _held(dataset, adopted)
+        if held is not None and held.fingerprint == labeller.fingerprint:
+            kept += 1
+        elif held is not None and not replace:
+            raise ConfigError(
+                f"{dataset.path(entry)} holds camera labels of another labeller ({held.labeller}, "
+                f"fingerprint {held.fingerprint[:16]}…; this one's is {labeller.fingerprint[:16]}…): "
+                "add --replace to relabel every run with this one"
+            )
+        else:
+            pending.append((entry.split, entry.index))
+    for key in tqdm(pending, desc="label", unit="run", disable=not progress):
+        entry = dataset.entry(*key)  # as adopted, if it was
+        with dataset.reader(entry) as reader:
+            labels = labeller.label(reader)
+        dataset.set_camera_labels(entry, labels)
+    return len(pending), kept
+
+
+def _held(dataset: Dataset, entry: RunEntry) -> CameraLabels | None:
+    with dataset.reader(entry) as reader:
+        return reader.camera_labels()
