@@ -32,6 +32,19 @@ def small_dataset(tmp_path_factory):
     return root
 
 
+@pytest.fixture(scope="session")
+def small_hard_dataset(tmp_path_factory):
+    """A small dataset of the hard canyon family: 3 training runs and 1 validation run of ≤ 40 steps,
+    seed 0, collected once per session (the other family than `small_dataset`'s, for what must learn on
+    one family and act on the other). Tests may add to its feature cache but must not change its runs."""
+    from depthq.data.recorder import CollectConfig, collect, exploration_env
+
+    root = tmp_path_factory.mktemp("small_hard") / "data"
+    config = CollectConfig(runs=3, val_runs=1, max_steps=40, env=exploration_env(family="hard"))
+    collect(root, config, seed=0, workers=1, progress=False)
+    return root
+
+
 def assert_video(path, n_frames: int, fps: float) -> None:
     """A playable H.264 MP4 of the first canyon: one 1280×400 frame per decision, not blank, moving."""
     import imageio_ffmpeg
