@@ -33,6 +33,15 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert f"{summary['distance_to_collision_mean']:.2f}" in rows[3]
     assert f"| b | `{names[1]}` | {summary['distance_to_collision_mean']:.2f} |" in oracle_gap.compare(
         [("b", out / "eval" / names[1])])
+    # Paired by seed: the smoke run's own Table I, both networks at 3 and 6 runs (a seed 1 never ran).
+    table = oracle_gap.paired(smoke, (3, 6), (0, 1)).splitlines()
+    assert len(table) == 2 + 2 * len(oracle_gap.PAIRED)
+    coll, depth = (json.loads((smoke / "eval" / f"{net}_n6_s0" / "summary.json").read_text())["summary"]
+                   for net in ("coll", "depth"))
+    first = (f"| 6 | 0 | to first collision (m) | {coll['distance_to_collision_mean']:.2f} | "
+             f"{depth['distance_to_collision_mean']:.2f} | "
+             f"{depth['distance_to_collision_mean'] - coll['distance_to_collision_mean']:.2f} |")
+    assert first in table
     stamp = (out / "agreement.json").stat().st_mtime_ns
     assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
     assert (out / "agreement.json").stat().st_mtime_ns == stamp

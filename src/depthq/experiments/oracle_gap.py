@@ -4,11 +4,13 @@ along its own runs.
 
     python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500]
     python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500]
+    python -m depthq.experiments.oracle_gap paired SWEEP [--seeds 0,1,2] [--sizes 200,500]
 
 `run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
 measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
 measured once); `table` prints the Markdown table of what has finished. The `eval` canyons are never
-driven here.
+driven here. `paired` reads any sweep folder of both networks (e.g. a preset's Table I in the `eval`
+canyons) and compares them seed by seed.
 """
 
 from __future__ import annotations
@@ -171,12 +173,39 @@ def compare(named: list[tuple[str, Path]]) -> str:
     return "\n".join(lines)
 
 
+PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
+          ("closest mean (m)", "closest_mean", ".2f"))
+
+
+def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...]) -> str:
+    """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
+    of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
+    trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
+    out of their row."""
+    lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
+             "|---|---|---|---|---|---|"]
+    for n in sizes:
+        both = {}
+        for seed in seeds:
+            found = [Path(sweep) / "eval" / f"{net}_n{n}_s{seed}" / "summary.json"
+                     for net in ("coll", "depth")]
+            if all(f.is_file() for f in found):
+                both[seed] = [json.loads(f.read_text())["summary"] for f in found]
+        for label, key, fmt in PAIRED if both else ():
+            coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
+            diff = [d - c for c, d in zip(coll, depth, strict=True)]
+            cells = [mean_interval(v, fmt) for v in (coll, depth, diff)]
+            lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("action", choices=("run", "table", "compare"))
-    parser.add_argument("out", help="the sweep folder the candidates share; compare: NAME=EVAL,NAME=EVAL,…")
+    parser.add_argument("action", choices=("run", "table", "compare", "paired"))
+    parser.add_argument("out", help="the sweep folder the candidates share (paired: any sweep folder of "
+                                    "both networks); compare: NAME=EVAL,NAME=EVAL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     args = parser.parse_args(argv)
@@ -186,6 +215,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.out = Path(args.out)
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
+    if args.action == "paired":
+        print(paired(args.out, setup.sizes, setup.seeds))
+        return 0
     if args.action == "run":
         return run(args.out, setup)
     print(table(args.out, setup))
