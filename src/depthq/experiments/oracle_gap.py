@@ -173,21 +173,22 @@ def compare(named: list[tuple[str, Path]]) -> str:
     return "\n".join(lines)
 
 
+PATTERN = "eval/{net}_n{n}_s{seed}"  # a sweep's evaluation of a model
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
 
 
-def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...]) -> str:
+def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
     of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
     trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
-    out of their row."""
+    out of their row. `pattern` names a model's evaluation folder under `sweep`."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
     for n in sizes:
         both = {}
         for seed in seeds:
-            found = [Path(sweep) / "eval" / f"{net}_n{n}_s{seed}" / "summary.json"
+            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed) / "summary.json"
                      for net in ("coll", "depth")]
             if all(f.is_file() for f in found):
                 both[seed] = [json.loads(f.read_text())["summary"] for f in found]
@@ -208,6 +209,8 @@ def main(argv: list[str] | None = None) -> int:
                                     "both networks); compare: NAME=EVAL,NAME=EVAL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
+    parser.add_argument("--pattern", default=PATTERN,
+                        help="paired: a model's evaluation folder under OUT, from {net}, {n} and {seed}")
     args = parser.parse_args(argv)
     if args.action == "compare":
         pairs = [item.partition("=") for item in args.out.split(",")]
@@ -216,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out = Path(args.out)
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
     if args.action == "paired":
-        print(paired(args.out, setup.sizes, setup.seeds))
+        print(paired(args.out, setup.sizes, setup.seeds, args.pattern))
         return 0
     if args.action == "run":
         return run(args.out, setup)
