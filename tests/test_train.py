@@ -300,7 +300,8 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_corrupted_weights_are_refused_by_name(data: Path, tmp_path: Path) -> None:
-    out = train(_config(data, epochs=1), tmp_path / "run", progress=False)
+    # A checkpoint acting with its best weights, so that loading it by default reads best.safetensors.
+    out = train(_config(data, epochs=1, weights="best"), tmp_path / "run", progress=False)
     policy_before = QNetPolicy.from_checkpoint(out)
     best = out / "best.safetensors"
     blob = bytearray(best.read_bytes())
@@ -319,7 +320,7 @@ def test_corrupted_weights_are_refused_by_name(data: Path, tmp_path: Path) -> No
     blob[-1000] ^= 0x01
     state.write_bytes(bytes(blob))
     with pytest.raises(DataError, match=r"last_state\.safetensors: corrupted weights"):
-        train(_config(data, epochs=2), out, progress=False)
+        train(_config(data, epochs=2, weights="best"), out, progress=False)
 
     last = out / "last.safetensors"  # a file from before digests were recorded: loads, with a warning
     tensors = load(last.read_bytes())  # a copy: load_file maps the file that is rewritten next
