@@ -53,6 +53,7 @@ def _state(root: Path) -> dict[str, str]:
             if p.is_file() and "features" not in p.parts}
 
 
+@pytest.mark.slow  # the labeller's training and a labelling: fixtures of ~16 s
 def test_the_labeller_learns_the_current_bins_from_real_frames(labeller: Path) -> None:
     record = json.loads((labeller / CONFIG).read_text())
     assert record["losses"][-1] < record["losses"][0]  # L1 on the hard family's current LiDAR bins
@@ -64,6 +65,7 @@ def test_the_labeller_learns_the_current_bins_from_real_frames(labeller: Path) -
     assert train_labeller(again, labeller, progress=False) == labeller  # a finished folder is kept
 
 
+@pytest.mark.slow  # the labeller's training and a labelling: fixtures of ~16 s
 def test_labels_are_written_read_back_and_resumed(labelled: Path, small_dataset: Path, labeller: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     dataset, original, model = Dataset.open(labelled), Dataset.open(small_dataset), load_labeller(labeller)
@@ -136,6 +138,7 @@ def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, tmp_pa
     assert read_config(out)["train"]["labels"] == "lidar"
 
 
+@pytest.mark.slow  # the labeller's training and a labelling: fixtures of ~16 s
 def test_dataset_stats_rates_the_labels_against_the_lidar(labelled: Path, small_dataset: Path,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["dataset", "stats", str(labelled)]) == 0
@@ -150,6 +153,7 @@ def test_dataset_stats_rates_the_labels_against_the_lidar(labelled: Path, small_
     assert "camera labels" not in capsys.readouterr().out  # nothing to rate
 
 
+@pytest.mark.slow  # the labeller's training and a labelling: fixtures of ~16 s
 def test_bad_inputs_exit_2_and_write_nothing(small_hard_dataset: Path, small_dataset: Path, labeller: Path,
                                              tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     hard, paper = tmp_path / "hard", tmp_path / "paper"
