@@ -46,6 +46,7 @@ from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.errors import ConfigError, DataError
+from depthq.sim.canyon import PAPER
 
 MANIFEST = "manifest.json"
 RUNS = "runs"
@@ -144,6 +145,12 @@ class Dataset:
         for entry in self.entries():
             digest.update(f"{entry.split},{entry.index},{entry.sha256}\n".encode())
         return digest.hexdigest()
+
+    def family(self) -> str | None:
+        """The canyon family its runs drove in (the manifest's env.world; the paper's if unset); None for
+        a robot's recording."""
+        env = self.config.get("env")
+        return None if env is None else env["world"].get("family", PAPER)
 
     def has(self, split: str, index: int) -> bool:
         return (split, index) in self._runs

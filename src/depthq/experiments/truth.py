@@ -7,15 +7,19 @@ from __future__ import annotations
 import numpy as np
 
 from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError
 from depthq.evaluate.oracle import Oracle, OracleWorld, env_config
-from depthq.sim.canyon import PAPER, CanyonId
+from depthq.sim.canyon import CanyonId
 
 ONE_STEP = Oracle()  # the true next bins of each candidate: a perfect one-step Depth-Q-Net
 
 
 def family(dataset: Dataset) -> str:
     """The canyon family the dataset was collected in (its manifest's env.world; the paper's if unset)."""
-    return dataset.config["env"]["world"].get("family", PAPER)
+    found = dataset.family()
+    if found is None:
+        raise ConfigError(f"{dataset.root}: a robot's recording has no canyons to re-simulate")
+    return found
 
 
 def canyon(dataset: Dataset, split: str, run_id: int) -> str:

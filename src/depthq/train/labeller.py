@@ -44,7 +44,6 @@ from depthq.nets.losses import DEPTH_CLIP
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
-from depthq.sim.canyon import PAPER
 from depthq.sim.sensors import BinConfig
 from depthq.train.features import BATCH, FeatureTable, load_features
 
@@ -129,12 +128,6 @@ class Labeller:
         return CameraLabels(self.estimate(reader.run(images=True).images), NAME, self.fingerprint)
 
 
-def family(dataset: Dataset) -> str | None:
-    """The canyon family a dataset drove in (its manifest's env.world); None for a robot's recording."""
-    env = dataset.config.get("env")
-    return None if env is None else env["world"].get("family", PAPER)
-
-
 def bin_geometry(dataset: Dataset) -> dict[str, Any]:
     """The depth bins' config of a dataset (a robot's recording is resampled to the default's)."""
     env = dataset.config.get("env")
@@ -187,7 +180,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
         "config": to_dict(config), "name": NAME, **identity, "n_bins": int(train[1].shape[1]),
         "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
         "source": {"path": str(dataset.root.resolve()), "fingerprint": dataset.fingerprint(),
-                   "family": family(dataset)},
+                   "family": dataset.family()},
         "losses": [round(float(b.mean()), 6) for b in blocks], "val_l1": round(val_l1, 6),
     })
     return out
@@ -246,7 +239,7 @@ def check_applicable(labeller: Labeller, dataset: Dataset) -> None:
     if record["bins"] != bin_geometry(dataset):
         raise ConfigError(f"labeller bins {record['bins']} differ from {dataset.root}'s bins "
                           f"{bin_geometry(dataset)}: its labels would not be in this dataset's geometry")
-    source, target = record["source"]["family"], family(dataset)
+    source, target = record["source"]["family"], dataset.family()
     if source == target:
         raise ConfigError(
             f"the labeller learnt from the {source!r} family's LiDAR ({record['source']['path']}), and "
