@@ -1,10 +1,17 @@
 """Command-line flags made from a frozen config dataclass, so that flags and config cannot drift apart.
 
 Each field of a simple type (str, int, float, bool, `X | None`, `tuple[X, ...]`, `Literal[...]`)
-becomes `--field-name` (`--field_name` is accepted too): its type, default and help come from the
-class, the help from the comment above or beside the field, else from a docstring sentence that
-starts with the field's name in backticks. A field added to the class is a flag with no edit here;
-nested config dataclasses are left to the verb. `depthq sweep --set` parses values the same way.
+becomes `--field-name` (`--field_name` is accepted too); a field that is itself a config dataclass
+becomes one flag per field of its own, dotted, recursively (the way tyro spells them):
+`TrainConfig.samples.horizon` is `--samples.horizon`, `CollectConfig.env.world.decision_hz` is
+`--env.world.decision-hz`. Type, default and help come from the classes: the help from the comment
+above or beside the field, else from a docstring sentence that starts with the field's name in
+backticks; a nested field's default is its enclosing config's (CollectConfig's env is
+`exploration_env()`, not a bare `EnvConfig()`). A field added to a class is a flag with no edit here.
+
+A flag not given is not set: `config_from_args` builds the config from the flags given and leaves
+every other field at its default (or at the `base` config a verb passes), so what --help shows as a
+default is what a config gets.
 """
 
 from __future__ import annotations
@@ -30,36 +37,46 @@ _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 _SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=[A-Z`])")
 
 
-def flag_fields(cls: type) -> list[dataclasses.Field]:
-    """The fields of `cls` that are flags: all but nested dataclasses (a type no flag can spell is an
-    error here, when the parser is built, rather than a field silently left out)."""
-    hints = typing.get_type_hints(cls, include_extras=False)
+@dataclasses.dataclass(frozen=True)
+class Flag:
+    """The flag of one field of a config: `path` is the field's name, dotted below nested configs
+    ('samples.horizon'), and the flag's destination in the parsed arguments."""
+
+    path: str
+    owner: type  # the dataclass that declares the field
+    hint: Any
+    default: Any  # dataclasses.MISSING: a required flag
+    help: str  # from the class (`field_help`); empty when it has none
+
+    @property
+    def name(self) -> str:
+        """'--samples.min-frames' for path 'samples.min_frames'."""
+        return flag_name(self.path)
+
+
+def flag_name(path: str) -> str:
+    """The flag of a field path: 'env.world.decision_hz' → '--env.world.decision-hz'."""
+    return "--" + path.replace("_", "-")
+
+
+def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]:
+    """The flags of `cls`, nested configs' fields recursively. `default`: an instance whose values are
+    the defaults (None: the fields' own). A type no flag can spell is an error here, when the parser
+    is built, rather than a field silently left out."""
+    hints = typing.get_type_hints(cls)
+    docs = field_help(cls)
     out = []
     for f in dataclasses.fields(cls):
+        if not f.init:
+            continue
+        value = getattr(default, f.name) if default is not None else _default(f)
         hint = hints[f.name]
         if dataclasses.is_dataclass(hint):
+            out += config_flags(hint, None if value is dataclasses.MISSING else value, f"{prefix}{f.name}.")
             continue
         _check_type(hint, f"{cls.__name__}.{f.name}")
-        out.append(f)
+        out.append(Flag(prefix + f.name, cls, hint, value, docs.get(f.name, "")))
     return out
-
-
-def field_name(cls: type, name: str) -> str:
-    """'depth-loss' or 'depth_loss' → 'depth_loss', a field of `cls` (ConfigError naming it otherwise)."""
-    key = name.strip().replace("-", "_")
-    if key not in {f.name for f in flag_fields(cls)}:
-        allowed = ", ".join(f.name for f in flag_fields(cls))
-        raise ConfigError(f"{name!r} is not a setting of {cls.__name__}; one of: {allowed}")
-    return key
-
-
-def parse_value(cls: type, name: str, text: str) -> Any:
-    """`text` as a value of field `name` of `cls` (ConfigError naming the field and the text)."""
-    hint = typing.get_type_hints(cls)[name]
-    try:
-        return _parse(hint, text)
-    except ValueError as err:
-        raise ConfigError(f"{name}: {err}") from None
 
 
 def add_config_arguments(
@@ -69,43 +86,85 @@ def add_config_arguments(
     exclude: tuple[str, ...] = (),
     aliases: dict[str, tuple[str, ...]] | None = None,
     more_help: dict[str, str] | None = None,
-) -> None:
-    """A flag for every field of `cls` but `exclude`, in a group of its own. `aliases`: older
-    spellings of a field's flag (shown in --help); `more_help`: what the verb puts before a field's
-    help (its choices, or a text where the class has none)."""
+    default: Any = None,
+) -> list[Flag]:
+    """A flag for every field of `cls` (nested configs' fields dotted) but `exclude` (field paths, or
+    a nested config's path for all of its fields), in a group per config. `aliases`: other spellings
+    of a field's flag, e.g. the ones it had before (shown in --help); `more_help`: what the verb puts
+    before a field's help; `default`: an instance of `cls` whose values the help shows as defaults.
+    All three are keyed by field path. Returns the flags made."""
     aliases, more_help = aliases or {}, more_help or {}
-    hints = typing.get_type_hints(cls)
-    docs = field_help(cls)
-    summary = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
-    group = parser.add_argument_group(f"{cls.__name__} (every field a flag)", summary.replace("%", "%%"))
-    for f in flag_fields(cls):
-        if f.name in exclude:
-            continue
-        hint, default = hints[f.name], _default(f)
-        text = "; ".join(t for t in (more_help.get(f.name), docs.get(f.name)) if t)
-        if default is not dataclasses.MISSING:
-            text = f"{text} (default: {_show(default)})".strip()
-        names = (f"--{f.name.replace('_', '-')}", *aliases.get(f.name, ()))
-        kwargs: dict[str, Any] = {"dest": f.name}
-        if hint is bool:
+    flags = [f for f in config_flags(cls, default) if not _excluded(f.path, exclude)]
+    # A group per config, outer ones first: CollectConfig's own fields, then env's, env.world's, ...
+    owners = {f.path.rpartition(".")[0]: f.owner for f in flags}
+    order = [p for f in flags for p in _prefixes(f.path)]
+    groups = {where: _group(parser, cls, where, owners[where])
+              for where in sorted(owners, key=order.index)}
+    for flag in flags:
+        where = flag.path.rpartition(".")[0]
+        text = "; ".join(t for t in (more_help.get(flag.path), flag.help) if t)
+        if flag.default is not dataclasses.MISSING:
+            text = f"{text} (default: {_show(flag.default)})".strip()
+        kwargs: dict[str, Any] = {"dest": flag.path, "default": argparse.SUPPRESS}
+        if flag.hint is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
-            kwargs["type"] = _argparse_type(hint)
-            kwargs["metavar"] = _metavar(hint, f.name)
-        if default is dataclasses.MISSING:
-            kwargs["required"] = True
+            kwargs["type"] = _argparse_type(flag.hint)
+            kwargs["metavar"] = _metavar(flag.hint, flag.path.rpartition(".")[2])
+        names = (flag.name, *aliases.get(flag.path, ()))
+        groups[where].add_argument(*names, required=flag.default is dataclasses.MISSING,
+                                   help=text.replace("%", "%%"), **kwargs)
+        for name in names:  # the field's own spelling (underscores), not listed twice in --help
+            spelling = "--" + name[2:].replace("-", "_")
+            if spelling != name and spelling not in parser._option_string_actions:
+                groups[where].add_argument(spelling, help=argparse.SUPPRESS, **kwargs)
+    return flags
+
+
+def config_from_args(cls: type[T], args: argparse.Namespace, base: T | None = None, **given: Any) -> T:
+    """`cls` from the flags `add_config_arguments` made that were given, and `given` (field paths)
+    for the fields the verb sets; every other field at its default, or `base`'s when given."""
+    paths = {f.path for f in config_flags(cls)}
+    values = {k: v for k, v in vars(args).items() if k in paths}
+    return build_config(cls, {**values, **given}, base)
+
+
+def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) -> T:
+    """`cls` with the fields at the paths of `values` set ('samples.horizon' sets a field of the
+    nested config `samples`), every other field from `base`, else at its default; an unknown path
+    is a ConfigError naming it."""
+    own: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
+    for path, value in values.items():
+        name, dot, rest = path.partition(".")
+        if dot:
+            nested.setdefault(name, {})[rest] = value
         else:
-            kwargs["default"] = default
-        group.add_argument(*names, help=text.replace("%", "%%"), **kwargs)
-        if "_" in f.name:  # the field's own spelling, not listed twice in --help
-            group.add_argument(f"--{f.name}", **{**kwargs, "required": False, "default": argparse.SUPPRESS},
-                               help=argparse.SUPPRESS)
+            own[name] = value
+    fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted((set(own) | set(nested)) - set(fields))
+    if unknown:
+        raise ConfigError(f"{cls.__name__} has no setting {', '.join(unknown)}")
+    hints = typing.get_type_hints(cls)
+    for name, inner in nested.items():
+        if not dataclasses.is_dataclass(hints[name]):
+            raise ConfigError(f"{cls.__name__}.{name} is not a config: it has no {', '.join(inner)}")
+        if name in own:
+            inner_base = own[name]
+        elif base is not None:
+            inner_base = getattr(base, name)
+        else:
+            inner_base = _default(fields[name])
+        inner_base = None if inner_base is dataclasses.MISSING else inner_base
+        own[name] = build_config(hints[name], inner, inner_base)
+    return dataclasses.replace(base, **own) if base is not None else cls(**own)  # type: ignore[type-var]
 
 
-def config_from_args(cls: type[T], args: argparse.Namespace, **given: Any) -> T:
-    """`cls` from the flags `add_config_arguments` made, and `given` for the fields the verb sets."""
-    values = {f.name: getattr(args, f.name) for f in flag_fields(cls) if hasattr(args, f.name)}
-    return cls(**{**values, **given})
+def get_path(config: Any, path: str) -> Any:
+    """The value of a field path: get_path(train_config, 'samples.horizon')."""
+    for name in path.split("."):
+        config = getattr(config, name)
+    return config
 
 
 def field_help(cls: type) -> dict[str, str]:
@@ -134,7 +193,30 @@ def field_help(cls: type) -> dict[str, str]:
         if not parts:
             parts = [s for s in sentences if s.startswith(f"`{name}`")]
         out[name] = " ".join(parts)
+    for base in cls.__mro__[1:]:  # a field an ancestor declares, with the ancestor's help
+        if dataclasses.is_dataclass(base):
+            out = {**field_help(base), **out}
     return out
+
+
+def _prefixes(path: str) -> list[str]:
+    """'env.world.decision_hz' → ['', 'env', 'env.world']: the configs a field is in, outermost first."""
+    parts = path.split(".")[:-1]
+    return [".".join(parts[:k]) for k in range(len(parts) + 1)]
+
+
+def _excluded(path: str, exclude: tuple[str, ...]) -> bool:
+    return any(path == e or path.startswith(f"{e}.") for e in exclude)
+
+
+def _group(parser: argparse.ArgumentParser, cls: type, where: str, owner: type) -> argparse._ArgumentGroup:
+    """The --help group of the config at path `where` ('' for `cls` itself)."""
+    if not where:
+        title = f"{cls.__name__} (every field a flag)"
+    else:
+        title = f"{cls.__name__}.{where}: {owner.__name__} (--{where.replace('_', '-')}.*)"
+    summary = (inspect.getdoc(owner) or "").split("\n\n")[0].replace("\n", " ")
+    return parser.add_argument_group(title, summary.replace("%", "%%"))
 
 
 def _default(f: dataclasses.Field) -> Any:
@@ -156,7 +238,7 @@ def _metavar(hint: Any, name: str) -> str | None:
         return "{" + ",".join(map(str, typing.get_args(hint))) + "}"
     if typing.get_origin(hint) is tuple:
         return f"{name.upper()}[,...]"
-    return None
+    return name.upper()
 
 
 def _argparse_type(hint: Any):
