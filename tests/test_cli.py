@@ -50,7 +50,7 @@ def test_a_flag_sets_its_field_in_either_spelling() -> None:
     config = config_from_args(TrainConfig, build_parser("train").parse_args(argv))
     assert (config.model, config.data, config.action_scale, config.lr) == ("coll", "d", 3.0, None)
     assert (config.depth_loss, config.epochs) == ("valid_mean", 7)
-    assert (config.every_run_end, config.action_lag) == (False, 1)
+    assert (config.samples.every_run_end, config.samples.action_lag) == (False, 1)
 
 
 def test_renamed_flags_keep_their_old_spellings() -> None:

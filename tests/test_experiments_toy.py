@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from depthq import experiments
+from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env
 from depthq.evaluate.online import EvalConfig
@@ -71,8 +72,8 @@ def hard_checkpoints(hard_data: Path, tmp_path_factory: pytest.TempPathFactory) 
     """Two Depth-Q-Nets on `hard_data`: the default label horizon (5) and horizon 1."""
     out = tmp_path_factory.mktemp("hard_models")
     return tuple(  # type: ignore[return-value]
-        train(TrainConfig(model="depth", data=str(hard_data), horizon=h, **TOY_TRAINING), out / f"h{h}",
-              progress=False)
+        train(TrainConfig(model="depth", data=str(hard_data), samples=SampleConfig(horizon=h),
+                          **TOY_TRAINING), out / f"h{h}", progress=False)
         for h in (5, 1)
     )
 

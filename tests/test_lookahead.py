@@ -84,7 +84,7 @@ def test_a_view_refuses_a_bad_lookahead_by_value(small_dataset: Path) -> None:
     dataset = Dataset.open(small_dataset)
     with pytest.raises(ConfigError, match="lookahead must be an integer >= 1, got 0"):
         view_arrays(dataset, "train", None, "depth", CONFIG, lookahead=0)
-    with pytest.raises(ConfigError, match="got lookahead 3"):
+    with pytest.raises(ConfigError, match="its lookahead must be 1, got 3"):
         view_arrays(dataset, "train", None, "coll", CONFIG, lookahead=3)
     image, actions, targets = DepthView(dataset, "val", None, CONFIG, lookahead=2)[0]
     assert image.dtype == np.uint8 and actions.shape == (2,) and targets.shape == (2, 26)
@@ -130,7 +130,7 @@ def test_a_lookahead_head_takes_sequences_and_gives_every_step() -> None:
     assert out.shape == (4, 3, 26) and (out >= 0).all()
     with pytest.raises(ConfigError, match=r"expected action sequences \(B, 3\), got \(4,\)"):
         head(torch.randn(4, 64), torch.zeros(4))
-    with pytest.raises(ConfigError, match="Coll-Q-Net head takes one action, got 2"):
+    with pytest.raises(ConfigError, match="its lookahead must be 1, got 2"):
         HeadConfig("coll", 64, lookahead=2)
     with pytest.raises(ConfigError, match="lookahead must be a positive integer, got 0"):
         HeadConfig("depth", 64, lookahead=0)

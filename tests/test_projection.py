@@ -151,7 +151,7 @@ def _config_of(folder: Path) -> TrainConfig:
 def _training_features(config: TrainConfig) -> np.ndarray:
     """The cached features of `config`'s training samples, as the trainer gathers them."""
     dataset = Dataset.open(Path(config.data))
-    arrays = view_arrays(dataset, "train", config.runs, config.model, config.data_config(), config.lookahead)
+    arrays = view_arrays(dataset, "train", config.runs, config.model, config.samples, config.lookahead)
     table = load_features(dataset, config.trunk, config.input_size, progress=False)
     return table.gather("train", arrays).numpy()
 

@@ -14,6 +14,7 @@ from safetensors.torch import load, load_file, save
 
 from depthq.cli import main
 from depthq.configio import read_json
+from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env
 from depthq.data.views import DepthView
@@ -280,7 +281,8 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
     config = CollectConfig(runs=2, val_runs=1, max_steps=29, env=exploration_env(10.0))
     collect(no_bumps, config, seed=0, workers=1, progress=False)
     with pytest.raises(ConfigError, match="no run ended in a bump"):
-        train(_config(no_bumps, model="coll", every_run_end=False), tmp_path / "coll", progress=False)
+        train(_config(no_bumps, model="coll", samples=SampleConfig(every_run_end=False)), tmp_path / "coll",
+              progress=False)
     assert not (tmp_path / "coll").exists()
 
     (tmp_path / "empty").mkdir()

@@ -22,12 +22,64 @@ wall at 0 m) would teach depths that were never measured.
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from depthq.data.run import RunMeta
+from depthq.errors import ConfigError
 
 HORIZON = 5
 MIN_FRAMES = 20
+KINDS = ("depth", "coll")  # Depth-Q-Net's samples and Coll-Q-Net's
+
+
+@dataclass(frozen=True)
+class SampleConfig:
+    """Which frames of a dataset's runs are samples, and their labels (this module's functions).
+
+    The defaults are the original's: collision labels on the last `horizon` samples of every run
+    (`every_run_end`), and the stored command clipped to ±`action_clip` as the action label.
+    """
+
+    # Coll-Q-Net's collision label: a bump within this many frames (docs/design.md#labels).
+    horizon: int = HORIZON
+    # Runs shorter than this many frames are not used (docs/design.md#labels).
+    min_frames: int = MIN_FRAMES
+    # Every run's end is labelled a collision, as the original's labels had it; false: only a bump.
+    every_run_end: bool = True
+    # Recorded commands clipped to ±this (rad/s) before they become actions.
+    action_clip: float = 1.0
+    # 1: label frame t with the command of frame t-1 (the original recorder, likely).
+    action_lag: int = 0
+
+    def __post_init__(self) -> None:
+        for name, low in (("horizon", 1), ("min_frames", self.horizon + 2)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                why = " (horizon + 2: every usable run keeps a depth sample)" if name == "min_frames" else ""
+                raise ConfigError(f"{name} must be an integer >= {low}{why}, got {value!r}")
+        if not isinstance(self.every_run_end, bool):
+            raise ConfigError(f"every_run_end must be true or false, got {self.every_run_end!r}")
+        clip = self.action_clip
+        if isinstance(clip, bool) or not isinstance(clip, int | float) or not 0 < clip < math.inf:
+            raise ConfigError(f"action_clip must be a finite number > 0 rad/s, got {clip!r}")
+        if isinstance(self.action_lag, bool) or self.action_lag not in (0, 1):
+            raise ConfigError(f"action_lag must be 0 or 1, got {self.action_lag!r}")
+
+
+def check_lookahead(kind: str, lookahead: object, what: str = "lookahead") -> None:
+    """A `kind` network's lookahead (docs/design.md#lookahead), the one place its rule is: an integer
+    >= 1, and 1 for Coll-Q-Net, which looks ahead through its label's `horizon` (else a ConfigError
+    naming `what`)."""
+    if kind not in KINDS:
+        raise ConfigError(f"network kind must be one of {KINDS}, got {kind!r}")
+    if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
+        raise ConfigError(f"{what} must be an integer >= 1, got {lookahead!r}")
+    if kind == "coll" and lookahead != 1:
+        raise ConfigError(f"{what} is Depth-Q-Net's; Coll-Q-Net looks ahead through its label (horizon), "
+                          f"so its lookahead must be 1, got {lookahead!r}")
 
 
 def usable(meta: RunMeta, min_frames: int = MIN_FRAMES) -> bool:

@@ -28,9 +28,10 @@ import numpy as np
 from torch.utils.data import Dataset as TorchDataset
 from torch.utils.data import Sampler
 
-from depthq.data import DataConfig
 from depthq.data.camera_labels import LABEL_SOURCES, missing_labels_message
 from depthq.data.labels import (
+    SampleConfig,
+    check_lookahead,
     coll_sample_indices,
     collision_labels,
     depth_lookahead_frames,
@@ -44,15 +45,13 @@ from depthq.data.runfile import RunReader
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError
 
-KINDS = ("depth", "coll")
-
 
 def view_arrays(
     dataset: Dataset,
     split: str,
     n_runs: int | None,
     kind: str,
-    config: DataConfig | None = None,
+    config: SampleConfig | None = None,
     lookahead: int = 1,
     labels: str = "lidar",
 ) -> dict[str, np.ndarray]:
@@ -68,16 +67,10 @@ def view_arrays(
     clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
     step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.labels`).
     """
-    if kind not in KINDS:
-        raise ConfigError(f"view kind must be one of {KINDS}, got {kind!r}")
+    check_lookahead(kind, lookahead, "view lookahead")
     if labels not in LABEL_SOURCES:
         raise ConfigError(f"view labels must be one of {LABEL_SOURCES}, got {labels!r}")
-    if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
-        raise ConfigError(f"view lookahead must be an integer >= 1, got {lookahead!r}")
-    if kind == "coll" and lookahead != 1:
-        raise ConfigError(f"a Coll-Q-Net view looks one step ahead (its label has its own horizon), "
-                          f"got lookahead {lookahead}")
-    config = config or DataConfig()
+    config = config or SampleConfig()
     runs = select_runs(dataset, split, n_runs, config.min_frames)
     if not runs:
         raise ConfigError(f"{dataset.root} has no usable {split} runs (at least {config.min_frames} frames)")
@@ -165,7 +158,7 @@ class FrameView(TorchDataset):
         dataset: Dataset,
         split: str,
         n_runs: int | None = None,
-        config: DataConfig | None = None,
+        config: SampleConfig | None = None,
         max_open_files: int = 64,
         lookahead: int = 1,
         labels: str = "lidar",

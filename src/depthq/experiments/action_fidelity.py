@@ -44,7 +44,7 @@ def fidelity(checkpoint: Path, truth_cache: dict | None = None) -> dict[str, Any
     net, record = load_qnet(checkpoint)
     config = from_dict(TrainConfig, record["train"])
     dataset = Dataset.open(Path(config.data))
-    arrays = view_arrays(dataset, "val", None, "depth", config.data_config())
+    arrays = view_arrays(dataset, "val", None, "depth", config.samples)
     truth = next_bins(dataset, "val", arrays["run_id"], arrays["frame_id"], truth_cache)
     features = load_features(dataset, config.trunk, config.input_size, progress=False).gather("val", arrays)
     with torch.no_grad():

@@ -66,7 +66,7 @@ def lidar_table(dataset: Dataset, kind: str) -> FeatureTable:
 def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> torch.nn.Module:
     """`config`'s head trained on `kind` input as `depthq train` trains one on cached features."""
     table = lidar_table(dataset, kind)
-    arrays = view_arrays(dataset, "train", config.runs, net, config.data_config())
+    arrays = view_arrays(dataset, "train", config.runs, net, config.samples)
     samples = FeatureSamples(arrays, table, "train")
     torch.manual_seed(config.seed)
     head = build_head(HeadConfig(net, table.features.shape[1], hidden=config.hidden,
@@ -87,7 +87,7 @@ def train_perception(dataset: Dataset, config: TrainConfig) -> torch.nn.Module:
     """A head from the cached image feature to the current frame's 26 bins (invalid as the clip), L1
     over all bins, on the training runs' frames, with `config`'s optimizer and schedule."""
     table = load_features(dataset, config.trunk, config.input_size)
-    arrays = view_arrays(dataset, "train", config.runs, "depth", config.data_config())
+    arrays = view_arrays(dataset, "train", config.runs, "depth", config.samples)
     current = lidar_table(dataset, "bins")
     rows = table.rows("train", arrays["run_id"], arrays["frame_id"])
     features = torch.from_numpy(table.features[rows])

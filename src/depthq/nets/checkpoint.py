@@ -14,7 +14,8 @@ config.json (format version 3):
                              `snapshots`: epochs whose weights are kept as well; `lookahead`: the
                              steps a Depth-Q-Net predicts, also in `head`;
                              `feature_projection`: the size the feature is projected to, also
-                             in `head`, its map stored with the head's weights)
+                             in `head`, its map stored with the head's weights; `samples`: which
+                             frames were samples, their labels: `depthq.data.labels.SampleConfig`)
     head, trunk, trunk_frozen, input_size, learning_rate
                              the network, rebuilt from these
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
@@ -34,8 +35,9 @@ Older versions still load (`read_config` gives them version 3's shape): 1 (no di
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
 Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
 without `precision` a float32 training. Fields renamed within version 3 read under their new names:
-`train.select` as `train.weights`, `policy.selection` as `policy.rule`. A newer version is refused
-by name.
+`train.select` as `train.weights`, `policy.selection` as `policy.rule`; the sample settings a train
+record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`, `action_lag`) read
+inside `train.samples`, where TrainConfig holds them now. A newer version is refused by name.
 """
 
 from __future__ import annotations
@@ -44,7 +46,7 @@ import hashlib
 import json
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +57,7 @@ from safetensors.torch import save as save_safetensors
 
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
 from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
@@ -83,6 +86,9 @@ _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection":
                 "head_form": "concat", "labels": "lidar"}
 # Fields renamed within version 3 (old name → new), as a record written before the rename reads.
 _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
+# TrainConfig fields moved into a nested config within version 3 (#33: its sample settings into
+# `samples`), as a record written before the move reads.
+_NESTED_TRAIN = {"samples": tuple(f.name for f in fields(SampleConfig))}
 
 
 @dataclass(frozen=True)
@@ -224,7 +230,17 @@ def read_config(folder: Path) -> dict[str, Any]:
         )
     record = _renamed(record)
     record = record if version == FORMAT_VERSION else _upgrade(record)
-    return {**record, "train": {**_ADDED_TRAIN, **record.get("train", {})}}
+    return {**record, "train": _nested({**_ADDED_TRAIN, **record.get("train", {})})}
+
+
+def _nested(train: dict[str, Any]) -> dict[str, Any]:
+    """A train record with the fields moved into nested configs (`_NESTED_TRAIN`) there."""
+    out = dict(train)
+    for block, names in _NESTED_TRAIN.items():
+        moved = {name: out.pop(name) for name in names if name in out}
+        if moved:
+            out[block] = {**moved, **out.get(block, {})}
+    return out
 
 
 def _renamed(record: dict[str, Any]) -> dict[str, Any]:

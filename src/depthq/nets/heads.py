@@ -32,6 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from depthq.configio import OMIT_DEFAULT
+from depthq.data.labels import check_lookahead
 from depthq.errors import ConfigError
 from depthq.nets.trunk import Trunk
 
@@ -84,10 +85,7 @@ class HeadConfig:
             raise ConfigError(f"HeadConfig.dropout must be in [0, 1), got {self.dropout!r}")
         if not self.action_scale > 0:
             raise ConfigError(f"HeadConfig.action_scale must be > 0, got {self.action_scale!r}")
-        if self.kind == "coll" and self.lookahead != 1:
-            raise ConfigError(
-                f"HeadConfig.lookahead: a Coll-Q-Net head takes one action, got {self.lookahead!r}"
-            )
+        check_lookahead(self.kind, self.lookahead, "HeadConfig.lookahead")
         if self.form not in HEAD_FORMS:
             raise ConfigError(f"HeadConfig.form must be one of {HEAD_FORMS}, got {self.form!r}")
         if self.form != "concat" and (self.kind != "depth" or self.lookahead != 1):

@@ -12,24 +12,26 @@ from __future__ import annotations
 import itertools
 import json
 import re
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
+from depthq.flags import build_config, config_flags, get_path
 from depthq.report.layout import FOLDER_KEYS, NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train.config import TrainConfig
 
-Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field, value) pairs; () is the preset's own setting
+Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field path, value) pairs; () is the preset's own setting
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
 # Settings only Depth-Q-Net has (`TrainConfig.lookahead`): a Coll-Q-Net in a variant that sets them
 # is the variant without them, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
 # variant's row shows it).
 DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap")
-# Old spellings of renamed settings, accepted by --set for one release: 'select' → 'weights'.
+# Old spellings of renamed or moved settings, accepted by --set for one release: 'select' → 'weights',
+# 'horizon' → 'samples.horizon'.
 RENAMED_SETTINGS = {old: new for new, old in FOLDER_KEYS.items()}
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
@@ -116,20 +118,20 @@ class Sweep:
             for n in self.subsets
             for net in self.nets
         ]
-        return [replace(m, differs=tuple((k, v) for k, v in m.settings if getattr(own[m.net], k) != v))
+        return [replace(m, differs=tuple((k, v) for k, v in m.settings if get_path(own[m.net], k) != v))
                 for m in models]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
         budget = {} if self.epochs is None else {"epochs": self.epochs}
-        return TrainConfig(
-            model=model.net,
-            data=data,
-            runs=model.runs,
-            seed=model.seed,
-            train_batches=self.train_batches,
-            val_batches=self.val_batches,
+        return build_config(TrainConfig, {
+            "model": model.net,
+            "data": data,
+            "runs": model.runs,
+            "seed": model.seed,
+            "train_batches": self.train_batches,
+            "val_batches": self.val_batches,
             **(budget | dict(model.settings)),
-        )
+        })
 
     def setup(self) -> dict[str, Any]:
         """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent)."""
@@ -184,12 +186,13 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
 
 
 def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
-    """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field and the values to try. A
-    tuple field takes each value as items joined by '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
+    """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field (its path below a nested config:
+    'samples.horizon=1,2') and the values to try. A tuple field takes each value as items joined by
+    '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
     key, sep, raw = text.partition("=")
     key = key.strip().replace("-", "_")  # the flag's spelling (depthq train --action-scale) or the field's
     key = RENAMED_SETTINGS.get(key, key)
-    defaults = {f.name: f.default for f in fields(TrainConfig)}
+    defaults = {f.path: f.default for f in config_flags(TrainConfig)}
     if not sep or not raw:
         raise ConfigError(f"--set takes FIELD=VALUE[,VALUE…], got {text!r}")
     if key not in defaults or key in NOT_IN_GRID:

@@ -6,11 +6,11 @@ import argparse
 from pathlib import Path
 
 from depthq.configio import read_json
-from depthq.flags import add_config_arguments, config_from_args
+from depthq.flags import add_config_arguments, config_from_args, flag_name
 from depthq.nets.device import DEVICE_HELP
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.trunk import TRUNKS
-from depthq.train.config import TrainConfig
+from depthq.train.config import MOVED_SETTINGS, TrainConfig
 
 # What --help adds to TrainConfig's own comments: the choices, and words for undocumented fields.
 _HELP = {
@@ -19,12 +19,12 @@ _HELP = {
     "epochs": "epochs of train_batches training + val_batches validation batches",
     "trunk": f"one of {', '.join(sorted(TRUNKS))}",
     "depth_loss": f"one of {', '.join(DEPTH_LOSSES)}",
-    "action_lag": "1: label frame t with the command of frame t-1 (the original recorder, likely)",
 }
 
 
-# Older spellings of TrainConfig's flags, accepted for one release.
-_ALIASES = {"weights": ("--select",)}
+# Older spellings of TrainConfig's flags, accepted for one release: --select, and the sample settings'
+# flat flags from before TrainConfig held them in `samples` (--horizon for --samples.horizon).
+_ALIASES = {"weights": ("--select",), **{path: (flag_name(old),) for old, path in MOVED_SETTINGS.items()}}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from depthq.configio import OMIT_DEFAULT
-from depthq.data import DataConfig
 from depthq.data.camera_labels import LABEL_SOURCES
-from depthq.data.labels import HORIZON, MIN_FRAMES
+from depthq.data.labels import SampleConfig, check_lookahead
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import WEIGHTS
 from depthq.nets.heads import HEAD_FORMS, HEAD_KINDS, HeadConfig, default_form
@@ -32,6 +31,10 @@ DEFAULT_EPOCHS = 40
 DEFAULT_WEIGHTS = {"depth_first": "final"}
 # The forward pass's arithmetic in training and validation (docs/benchmarks.md#precision).
 PRECISIONS = ("fp32", "bf16")
+# TrainConfig's settings that moved into its `samples` (#33), by the names they had before: their old
+# flags (--horizon), sweep settings (--set horizon=2) and model folder names (coll_n200_s0_horizon2)
+# still take them, for one release.
+MOVED_SETTINGS = {f.name: f"samples.{f.name}" for f in fields(SampleConfig)}
 
 
 def check_precisions(precisions: tuple[str, ...], what: str) -> None:
@@ -95,7 +98,7 @@ class TrainConfig:
     input_size: int = INPUT_SIZE
     depth_loss: str = "original"  # `depthq.nets.losses.depth_l1_loss`
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
-    # the K actions taken; 1 is the paper's one-step net. Not `horizon`, which is Coll-Q-Net's
+    # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's
     # collision-label window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
     # separate settings (a lookahead of 3 with the original's labels keeps horizon 5). Coll-Q-Net: 1.
     lookahead: int = 1
@@ -128,16 +131,8 @@ class TrainConfig:
     # those a labeller estimated from the camera ("camera", written by `depthq label`;
     # docs/design.md#camera-labels). Coll-Q-Net's label is the bump: "lidar" only.
     labels: str = "lidar"
-    # Coll-Q-Net's collision label: a bump within this many frames (docs/design.md#labels).
-    horizon: int = HORIZON
-    # Runs shorter than this many frames are not used (docs/design.md#labels).
-    min_frames: int = MIN_FRAMES
-    # Drop the samples before every run's end, not only a bumped one's (the original's labels).
-    every_run_end: bool = True
-    # Recorded commands clipped to ±this before they become actions.
-    action_clip: float = 1.0
-    # 1: label frame t with the command of frame t-1 (the original recorder, likely).
-    action_lag: int = 0
+    # Which frames of the dataset's runs are samples, and their labels (docs/design.md#labels).
+    samples: SampleConfig = field(default_factory=SampleConfig)
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
     # validation loss) or final (after the last epoch, as the original evaluated them); none: final
     # for a depth_first head, else best. The head form's choice was made on `val` canyons
@@ -165,23 +160,19 @@ class TrainConfig:
         _int_at_least("seed", self.seed, 0)
         for name in ("epochs", "train_batches", "val_batches", "batch_size", "input_size"):
             _int_at_least(name, getattr(self, name), 1)
-        _int_at_least("lookahead", self.lookahead, 1)
-        if self.model == "coll" and self.lookahead != 1:
-            raise ConfigError(
-                f"train.lookahead is Depth-Q-Net's; Coll-Q-Net looks ahead through its label (horizon), "
-                f"so its lookahead must be 1, got {self.lookahead!r}"
-            )
+        check_lookahead(self.model, self.lookahead, "train.lookahead")
         discount = self.lookahead_discount
         if isinstance(discount, bool) or not isinstance(discount, int | float) or not 0 < discount <= 1:
             raise ConfigError(f"train.lookahead_discount must be in (0, 1], got {discount!r}")
-        _int_at_least("horizon", self.horizon, 1)
-        _int_at_least("min_frames", self.min_frames, self.horizon + 2)
-        _int_at_least("action_lag", self.action_lag, 0)
-        steps = self.min_frames - self.horizon - 1 - self.action_lag  # in the shortest usable run
+        if not isinstance(self.samples, SampleConfig):
+            raise ConfigError(f"train.samples must be a SampleConfig, got {self.samples!r}")
+        samples = self.samples
+        steps = samples.min_frames - samples.horizon - 1 - samples.action_lag  # in the shortest usable run
         if self.lookahead > steps:
             raise ConfigError(
                 f"train.lookahead {self.lookahead} is more steps than the shortest usable run has after "
-                f"a sample (min_frames - horizon - 1 - action_lag = {steps}): raise min_frames or lower it"
+                f"a sample (min_frames - horizon - 1 - action_lag = {steps}): raise samples.min_frames "
+                "or lower it"
             )
         if self.lr is not None:
             _positive_float("lr", self.lr)
@@ -218,7 +209,6 @@ class TrainConfig:
                 f"train.labels {self.labels!r}: Coll-Q-Net learns from the bump, not from depth bins; "
                 "camera labels are Depth-Q-Net's (--model depth), use --labels lidar"
             )
-        self.data_config()  # checks the label fields
 
     def _check_projection(self) -> None:
         _int_at_least("feature_projection", self.feature_projection, 0)
@@ -261,16 +251,6 @@ class TrainConfig:
         repeated = sorted({e for e in self.snapshots if self.snapshots.count(e) > 1})
         if repeated:
             raise ConfigError(f"train.snapshots repeats epoch(s) {repeated}: {self.snapshots}")
-
-    def data_config(self) -> DataConfig:
-        """How the dataset's runs become this training's samples."""
-        return DataConfig(
-            horizon=self.horizon,
-            min_frames=self.min_frames,
-            every_run_end=self.every_run_end,
-            action_clip=self.action_clip,
-            action_lag=self.action_lag,
-        )
 
     def step_weights(self) -> tuple[float, ...]:
         """The loss weight of each lookahead step, t+1 first."""

@@ -45,7 +45,7 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     train_config = from_dict(TrainConfig, train)
     lookahead = train_config.lookahead
     # scored against the LiDAR's bins whatever the training's labels: the measured depth is the truth
-    arrays = view_arrays(dataset, "val", None, kind, train_config.data_config(), lookahead)
+    arrays = view_arrays(dataset, "val", None, kind, train_config.samples, lookahead)
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
     targets = torch.from_numpy(np.asarray(arrays["target"], np.float32))
     size = int(train["input_size"])

@@ -180,7 +180,7 @@ def _samples(
     config: TrainConfig, dataset: Dataset, progress: bool, device: torch.device
 ) -> tuple[Samples, Samples]:
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
-    data = config.data_config()
+    data = config.samples
     if TRUNKS[config.trunk].frozen:
         arrays = {split: view_arrays(dataset, split, n, config.model, data, config.lookahead, config.labels)
                   for split, n in (("train", config.runs), ("val", None))}
