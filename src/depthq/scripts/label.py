@@ -13,7 +13,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--from", dest="source", choices=SOURCES, required=True,
                    help="what the bins are estimated from: camera (each stored frame)")
     p.add_argument("--labeller", type=Path, required=True,
-                   help="labeller folder (`depthq labeller`), trained on another canyon family")
+                   help="labeller folder (`depthq labeller`)")
     p.add_argument("--replace", action="store_true",
                    help="replace labels another labeller wrote (refused otherwise, so none are mixed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

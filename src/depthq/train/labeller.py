@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,50 +46,80 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
 from depthq.sim.sensors import BinConfig
+from depthq.train import floor
 from depthq.train.features import BATCH, FeatureTable, load_features
 
 FORMAT = "depthq-labeller"
 FORMAT_VERSION = 1
 CONFIG = "config.json"
 WEIGHTS = "weights.safetensors"
-NAME = "perception"
 LOG_BLOCKS = 10  # the training loss is recorded as the mean over each tenth of the steps
+
+
+METHODS = ("floor", "perception")
+# The method's defaults of the settings a LabellerConfig leaves None: (steps, batch_size, lr).
+_DEFAULTS = {"floor": (600, 8, 1e-3), "perception": (4000, 64, 0.1)}
 
 
 @dataclass(frozen=True)
 class LabellerConfig:
-    """One labeller training: the frozen trunk's feature → the current LiDAR bins of `data`."""
+    """One labeller training on `data` (docs/design.md#camera-labels)."""
 
-    # The dataset whose LiDAR teaches it: another canyon family's than the datasets it will label.
+    # The dataset it learns from: for "floor" its camera and odometry (it may be the dataset to label);
+    # for "perception" its LiDAR (another canyon family's than the datasets it will label).
     data: str
-    # A frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
+    # How a frame becomes bins: "floor" (camera and odometry only: where the floor ends, learnt from the
+    # robot's future footprint) or "perception" (a read-out of the trunk's feature learnt on another
+    # family's LiDAR: a stand-in for an off-the-shelf depth model).
+    method: str = "floor"
+    # perception: a frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
     trunk: str = DEFAULT_TRUNK
-    # Side of the square image the trunk sees, in pixels.
+    # perception: side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
-    # Width of the read-out's hidden layer (the depth-first head's).
+    # perception: width of the read-out's hidden layer (the depth-first head's).
     hidden: int = 4096
-    # Adadelta steps, each on a batch drawn "a random run, then a random frame of it" (a training's 40 × 100).
-    steps: int = 4000
-    # Frames per step.
-    batch_size: int = 64
-    # Adadelta's learning rate (the heads').
-    lr: float = 0.1
-    # Seeds the initialisation and the batches.
+    # floor: frames are box-averaged by this factor before the floor net (2: 205 × 154 pixels).
+    scale: int = 2
+    # floor: channels of the floor net's layers.
+    width: int = 16
+    # floor: the next poses whose footprint is free floor (12: 3 s at 4 Hz, 1.5 m at 0.5 m/s).
+    lookahead: int = 12
+    # floor: floor nearer than this (m ahead of the camera) is neither learnt nor judged.
+    nearest: float = 0.3
+    # floor: random frames of each training run in the training pool (held in memory, reduced).
+    pool_frames: int = 6
+    # floor: the first training runs whose frames make the pool.
+    pool_runs: int = 300
+    # Optimiser steps; none: the method's (floor 600, perception 4000 = a training's 40 × 100).
+    steps: int | None = None
+    # Frames per step; none: the method's (floor 8, perception 64).
+    batch_size: int | None = None
+    # Learning rate; none: the method's (floor: Adam's 1e-3; perception: Adadelta's 0.1, the heads').
+    lr: float | None = None
+    # Seeds the initialisation, the pool and the batches.
     seed: int = 0
 
     def __post_init__(self) -> None:
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
+        if self.method not in METHODS:
+            raise ConfigError(f"labeller.method must be one of {list(METHODS)}, got {self.method!r}")
         spec = TRUNKS.get(self.trunk)
         if spec is None or not spec.frozen:
             frozen = sorted(name for name, s in TRUNKS.items() if s.frozen)
             raise ConfigError(f"labeller.trunk must be a frozen trunk, one of {frozen}, got {self.trunk!r}")
-        for name, low in (("input_size", 1), ("hidden", 1), ("steps", 1), ("batch_size", 1), ("seed", 0)):
+        for name, value in zip(("steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        for name, low in (("input_size", 1), ("hidden", 1), ("scale", 1), ("width", 1), ("lookahead", 1),
+                          ("pool_frames", 1), ("pool_runs", 1), ("steps", 1), ("batch_size", 1), ("seed", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ConfigError(f"labeller.{name} must be an integer >= {low}, got {value!r}")
-        if isinstance(self.lr, bool) or not isinstance(self.lr, int | float) or not 0 < self.lr < np.inf:
-            raise ConfigError(f"labeller.lr must be a finite number > 0, got {self.lr!r}")
+        for name in ("lr", "nearest"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < np.inf:
+                raise ConfigError(f"labeller.{name} must be a finite number > 0, got {value!r}")
 
 
 class Perception(nn.Module):
@@ -106,26 +137,31 @@ class Perception(nn.Module):
         return self.current(torch.relu(self.hidden(feature)))
 
 
-@dataclass(frozen=True, eq=False)
-class Labeller:
-    """A trained labeller ready to label frames (`load_labeller`)."""
+class PerceptionEstimate:
+    """uint8 frames (N, H, W, 3) → bins (N, n_bins), clipped to [0, DEPTH_CLIP] m: trunk, then read-out."""
 
-    net: Perception
-    trunk: Trunk
-    input_size: int
-    fingerprint: str
-    record: dict[str, Any]  # its config.json
+    def __init__(self, net: Perception, trunk: Trunk, input_size: int) -> None:
+        self.net, self.trunk, self.input_size = net, trunk, input_size
 
     @torch.inference_mode()
-    def estimate(self, frames: np.ndarray) -> np.ndarray:
-        """uint8 frames (N, H, W, 3) → their bins (N, n_bins) float32, clipped to [0, DEPTH_CLIP] m."""
+    def __call__(self, frames: np.ndarray) -> np.ndarray:
         bins = [self.net(self.trunk(preprocess(frames[i : i + BATCH], self.input_size)))
                 for i in range(0, len(frames), BATCH)]
         return torch.cat(bins).clamp(0.0, DEPTH_CLIP).numpy().astype(np.float32)
 
+
+@dataclass(frozen=True, eq=False)
+class Labeller:
+    """A trained labeller ready to label frames (`load_labeller`)."""
+
+    estimate: Callable[[np.ndarray], np.ndarray]  # uint8 frames (N, H, W, 3) → bins (N, n_bins) float32
+    fingerprint: str
+    record: dict[str, Any]  # its config.json
+
     def label(self, reader: RunReader) -> CameraLabels:
         """A run's camera labels: every stored frame's estimated bins."""
-        return CameraLabels(self.estimate(reader.run(images=True).images), NAME, self.fingerprint)
+        return CameraLabels(self.estimate(reader.run(images=True).images), self.record["name"],
+                            self.fingerprint)
 
 
 def bin_geometry(dataset: Dataset) -> dict[str, Any]:
@@ -140,8 +176,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
     `device`: see `depthq.nets.device`."""
     out, device = Path(out), resolve_device(device)
     if (out / CONFIG).is_file():
-        record = read_json(out / CONFIG)
-        if record.get("config") != to_dict(config):
+        if _config_record(read_json(out / CONFIG)) != to_dict(config):
             raise ConfigError(f"--out {out} holds another labeller (config.json differs); use another folder")
         return out
     if out.exists() and any(out.iterdir()):
@@ -150,12 +185,42 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
     for split in ("train", "val"):
         if not dataset.entries(split):
             raise ConfigError(f"{dataset.root} has no {split} runs to train a labeller on")
+    torch.set_num_threads(cores())
+    torch.manual_seed(config.seed)
+    if config.method == "floor":
+        geo = floor.geometry(dataset.config.get("env"), config.scale)
+        net, losses, val = floor.train(dataset, geo, config, progress, device)
+        identity = {"method": "floor", "scale": config.scale, "nearest": config.nearest,
+                    "width": config.width, "geometry": floor.geometry_record(geo),
+                    "bins": bin_geometry(dataset)}
+        results = {"val_loss": round(val, 6)}
+    else:
+        net, losses, val = _train_perception(dataset, config, progress, device)
+        identity = _identity(config.trunk, config.input_size, bin_geometry(dataset))
+        results = {"val_l1": round(val, 6)}
+    tensors = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(out / WEIGHTS, weights_bytes(tensors))
+    blocks = np.array_split(np.asarray(losses), min(LOG_BLOCKS, len(losses)))
+    write_json(out / CONFIG, {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "provenance": provenance(),
+        "config": to_dict(config), "name": config.method, **identity, "bins": bin_geometry(dataset),
+        "n_bins": BinConfig(**bin_geometry(dataset)).n_bins,
+        "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
+        "source": {"path": str(dataset.root.resolve()), "fingerprint": dataset.fingerprint(),
+                   "family": dataset.family()},
+        "losses": [round(float(b.mean()), 6) for b in blocks], **results,
+    })
+    return out
+
+
+def _train_perception(dataset: Dataset, config: LabellerConfig, progress: bool, device: torch.device
+                      ) -> tuple[nn.Module, list[float], float]:
+    """The perception read-out learnt on `dataset`'s current LiDAR bins: (net, losses, val L1 in m)."""
     table = load_features(dataset, config.trunk, config.input_size, progress, device)
     train, val = (_frames(dataset, table, split) for split in ("train", "val"))
     features = {split: torch.from_numpy(table.features[rows]).float()
                 for split, (rows, _, _) in (("train", train), ("val", val))}
-    torch.set_num_threads(cores())
-    torch.manual_seed(config.seed)
     net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, train[1].shape[1]).to(device)
     optimizer = make_optimizer(net, config.lr, weight_decay=0.0)
     rng = np.random.default_rng(config.seed)
@@ -169,21 +234,14 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
         losses.append(loss.item())
     with torch.no_grad():
         val_l1 = (net(features["val"].to(device)).cpu() - val[1]).abs().mean().item()
-    tensors = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
-    blob = weights_bytes(tensors)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(out / WEIGHTS, blob)
-    identity = _identity(config.trunk, config.input_size, bin_geometry(dataset))
-    blocks = np.array_split(np.asarray(losses), min(LOG_BLOCKS, len(losses)))
-    write_json(out / CONFIG, {
-        "format": FORMAT, "format_version": FORMAT_VERSION, "provenance": provenance(),
-        "config": to_dict(config), "name": NAME, **identity, "n_bins": int(train[1].shape[1]),
-        "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
-        "source": {"path": str(dataset.root.resolve()), "fingerprint": dataset.fingerprint(),
-                   "family": dataset.family()},
-        "losses": [round(float(b.mean()), 6) for b in blocks], "val_l1": round(val_l1, 6),
-    })
-    return out
+    return net.cpu(), losses, val_l1
+
+
+def _config_record(record: dict[str, Any]) -> dict[str, Any]:
+    """A labeller record's config, upgraded: one written before `method` existed is a perception one."""
+    config = dict(record["config"])
+    config.setdefault("method", "perception")
+    return to_dict(from_dict(LabellerConfig, config))
 
 
 def load_labeller(folder: Path) -> Labeller:
@@ -193,23 +251,32 @@ def load_labeller(folder: Path) -> Labeller:
     path = folder / CONFIG
     if not path.is_file():
         raise ConfigError(f"--labeller {folder}: not a labeller folder (no {CONFIG}; make one with "
-                          "`depthq labeller --data OTHER_DATASET --out FOLDER`)")
+                          "`depthq labeller --data DATASET --out FOLDER`)")
     record = read_json(path)
     if not isinstance(record, dict) or record.get("format") != FORMAT:
         raise ConfigError(f"{path}: not a {FORMAT} config")
     if record.get("format_version") != FORMAT_VERSION:
         raise ConfigError(f"{path}: labeller format version {record.get('format_version')!r}, this depthq "
                           f"reads {FORMAT_VERSION}")
-    config = from_dict(LabellerConfig, record["config"])
+    config = from_dict(LabellerConfig, _config_record(record))
     tensors, metadata = read_weights(folder / WEIGHTS)
-    net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
+    if config.method == "floor":
+        net: nn.Module = floor.FloorNet(config.width)
+        identity = {key: record[key] for key in ("method", "scale", "nearest", "width", "geometry", "bins")}
+    else:
+        net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
+        identity = _identity(config.trunk, config.input_size, record["bins"])
     try:
         net.load_state_dict(tensors)
     except RuntimeError as err:
         raise ConfigError(f"{folder / WEIGHTS}: weights do not fit its {CONFIG} ({err})") from err
-    identity = _identity(config.trunk, config.input_size, record["bins"])
-    return Labeller(net.eval(), build_trunk(config.trunk), config.input_size,
-                    _fingerprint(identity, metadata[DIGEST]), record)
+    net.eval()
+    if config.method == "floor":
+        geo = floor.geometry(floor.env_of(record["geometry"], record["bins"]), config.scale)
+        estimate: Callable[[np.ndarray], np.ndarray] = floor.FloorEstimate(net, geo, config.nearest)
+    else:
+        estimate = PerceptionEstimate(net, build_trunk(config.trunk), config.input_size)
+    return Labeller(estimate, _fingerprint(identity, metadata[DIGEST]), record)
 
 
 def _frames(dataset: Dataset, table: FeatureTable, split: str) -> tuple[np.ndarray, torch.Tensor, np.ndarray]:
@@ -233,12 +300,19 @@ def _fingerprint(identity: dict[str, Any], weights_digest: str) -> str:
 
 
 def check_applicable(labeller: Labeller, dataset: Dataset) -> None:
-    """ConfigError unless `labeller` may label `dataset`: bins of the same geometry, and learnt on another
-    canyon family (no depth of the canyons it labels; a robot's recording is no canyon family)."""
+    """ConfigError unless `labeller` may label `dataset`: bins of the same geometry; a floor labeller,
+    the same camera and robot; a perception labeller, learnt on another canyon family (no depth of the
+    canyons it labels; a robot's recording is no canyon family)."""
     record = labeller.record
     if record["bins"] != bin_geometry(dataset):
         raise ConfigError(f"labeller bins {record['bins']} differ from {dataset.root}'s bins "
                           f"{bin_geometry(dataset)}: its labels would not be in this dataset's geometry")
+    if record["name"] == "floor":
+        own = floor.geometry_record(floor.geometry(dataset.config.get("env"), record["scale"]))
+        if own != record["geometry"]:
+            raise ConfigError(f"labeller camera and robot {record['geometry']} differ from {dataset.root}'s "
+                              f"{own}: its floor rows would give wrong distances")
+        return
     source, target = record["source"]["family"], dataset.family()
     if source == target:
         raise ConfigError(
