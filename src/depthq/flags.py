@@ -84,26 +84,33 @@ def add_config_arguments(
     cls: type,
     *,
     exclude: tuple[str, ...] = (),
+    only: tuple[str, ...] | None = None,
     aliases: dict[str, tuple[str, ...]] | None = None,
     more_help: dict[str, str] | None = None,
     default: Any = None,
+    shown_defaults: dict[str, str] | None = None,
 ) -> list[Flag]:
     """A flag for every field of `cls` (nested configs' fields dotted) but `exclude` (field paths, or
-    a nested config's path for all of its fields), in a group per config. `aliases`: other spellings
-    of a field's flag, e.g. the ones it had before (shown in --help); `more_help`: what the verb puts
-    before a field's help; `default`: an instance of `cls` whose values the help shows as defaults.
-    All three are keyed by field path. Returns the flags made."""
-    aliases, more_help = aliases or {}, more_help or {}
-    flags = [f for f in config_flags(cls, default) if not _excluded(f.path, exclude)]
+    a nested config's path for all of its fields), in a group per config; `only`: the flags of these
+    paths alone, for a verb that sets one or two fields of a config it does not build itself.
+    `aliases`: other spellings of a field's flag, e.g. the ones it had before (shown in --help);
+    `more_help`: what the verb adds to a field's help; `default`: an instance of `cls` whose
+    values the help shows as defaults; `shown_defaults`: a default in words, where the verb's is not
+    the config's ("the preset's"). Keyed by field path. Returns the flags made."""
+    aliases, more_help, shown_defaults = aliases or {}, more_help or {}, shown_defaults or {}
+    flags = [f for f in config_flags(cls, default)
+             if not _excluded(f.path, exclude) and (only is None or f.path in only)]
     # A group per config, outer ones first: CollectConfig's own fields, then env's, env.world's, ...
     owners = {f.path.rpartition(".")[0]: f.owner for f in flags}
     order = [p for f in flags for p in _prefixes(f.path)]
-    groups = {where: _group(parser, cls, where, owners[where])
+    groups = {where: _group(parser, cls, where, owners[where], only is not None)
               for where in sorted(owners, key=order.index)}
     for flag in flags:
         where = flag.path.rpartition(".")[0]
-        text = "; ".join(t for t in (more_help.get(flag.path), flag.help) if t)
-        if flag.default is not dataclasses.MISSING:
+        text = "; ".join(t.rstrip(".") for t in (flag.help, more_help.get(flag.path)) if t)
+        if flag.path in shown_defaults:
+            text = f"{text} (default: {shown_defaults[flag.path]})".strip()
+        elif flag.default is not dataclasses.MISSING:
             text = f"{text} (default: {_show(flag.default)})".strip()
         kwargs: dict[str, Any] = {"dest": flag.path, "default": argparse.SUPPRESS}
         if flag.hint is bool:
@@ -209,9 +216,14 @@ def _excluded(path: str, exclude: tuple[str, ...]) -> bool:
     return any(path == e or path.startswith(f"{e}.") for e in exclude)
 
 
-def _group(parser: argparse.ArgumentParser, cls: type, where: str, owner: type) -> argparse._ArgumentGroup:
-    """The --help group of the config at path `where` ('' for `cls` itself)."""
-    if not where:
+def _group(
+    parser: argparse.ArgumentParser, cls: type, where: str, owner: type, some: bool = False
+) -> argparse._ArgumentGroup:
+    """The --help group of the config at path `where` ('' for `cls` itself); `some`: not all of its
+    fields are flags."""
+    if some:
+        title = f"{cls.__name__}{'.' + where + ': ' + owner.__name__ if where else ''} (some fields as flags)"
+    elif not where:
         title = f"{cls.__name__} (every field a flag)"
     else:
         title = f"{cls.__name__}.{where}: {owner.__name__} (--{where.replace('_', '-')}.*)"

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,7 @@ from depthq.data.labels import HORIZON
 from depthq.experiments.cells import mean_interval
 from depthq.nets.checkpoint import read_config
 from depthq.report.presets import get_preset
-from depthq.report.sweep import Sweep, parse_setting, retarget
+from depthq.report.sweep import Sweep, parse_setting, retarget, widened
 
 SIZES, SEEDS = (200, 500), (0, 1)
 PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "weights=final")
@@ -126,7 +126,7 @@ def sweep_args(ladder: Ladder, rung: Rung, net: str, seeds: tuple[int, ...], out
 def sweep_of(ladder: Ladder, rung: Rung, net: str) -> Sweep:
     """The Sweep that `sweep_args` runs, to find its models' folders."""
     grid = tuple(parse_setting(s) for s in rung.settings(net))
-    return replace(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz),
+    return widened(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz),
                    runs=max(ladder.sizes), subsets=ladder.sizes, seeds=rung.seeds, nets=(net,), grid=grid)
 
 

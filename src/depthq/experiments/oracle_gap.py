@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +28,7 @@ from depthq.evaluate.oracle import Oracle
 from depthq.experiments.cells import mean_interval
 from depthq.report.presets import get_preset
 from depthq.report.probe import measure_agreement
-from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget
+from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget, widened
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,7 @@ def sweep_args(setup: Setup, candidate: Candidate, seed: int, out: Path) -> list
 
 def model_names(setup: Setup, candidate: Candidate, size: int) -> list[str]:
     """The model folders a candidate's sweeps train at `size`, one per seed."""
-    sweep = replace(
+    sweep = widened(
         retarget(get_preset(setup.preset), None, setup.canyons),
         runs=setup.runs,
         subsets=(size,),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict
+from depthq.configio import atomic_write_bytes, provenance, read_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
@@ -121,7 +121,7 @@ def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> No
                 "Configuration",
                 page.pre(
                     {
-                        "sweep": to_dict(sweep),
+                        "sweep": sweep.record(),
                         "provenance": provenance(),
                         "dataset": {k: stats[k] for k in ("collected", "usable", "frames", "kb_per_frame")},
                     }

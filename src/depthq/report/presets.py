@@ -5,69 +5,51 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from depthq.data.recorder import CollectConfig
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
-from depthq.report.sweep import Sweep
-from depthq.sim.canyon import FAMILIES
+from depthq.report.sweep import Sweep, retarget
 from depthq.sim.world import NOMINAL_DECISION_HZ
 
 PRESETS: dict[str, Sweep] = {
     # A few minutes end to end; the test suite runs it.
     "smoke": Sweep(
         "smoke",
-        runs=6,
-        val_runs=2,
-        max_steps=60,
+        collect=CollectConfig(runs=6, val_runs=2, max_steps=60),
         subsets=(3, 6),
         seeds=(0,),
-        epochs=2,
-        train_batches=5,
-        val_batches=2,
+        train=(("epochs", 2), ("train_batches", 5), ("val_batches", 2)),
         canyons="eval:0-1",
-        time_limit_s=5.0,
+        evaluate=(("time_limit_s", 5.0),),
     ),
     # Same pipeline, fewer sizes and seeds: under 45 minutes on 2 CPU cores.
     "quick": Sweep(
         "quick",
-        runs=200,
-        val_runs=20,
-        max_steps=600,
+        collect=CollectConfig(runs=200, val_runs=20, max_steps=600),
         subsets=(50, 200),
         seeds=(0, 1),
-        epochs=None,
-        train_batches=100,
-        val_batches=10,
+        train=(("train_batches", 100), ("val_batches", 10)),
         canyons="eval",
-        time_limit_s=45.0,
+        evaluate=(("time_limit_s", 45.0),),
     ),
     # The paper's Table I: 6 dataset sizes × 3 seeds × 2 networks, 20 canyons each.
     "paper": Sweep(
         "paper",
-        runs=900,
-        val_runs=90,
-        max_steps=600,
+        collect=CollectConfig(runs=900, val_runs=90, max_steps=600),
         subsets=PAPER_SUBSETS,
         seeds=(0, 1, 2),
-        epochs=None,
-        train_batches=100,
-        val_batches=10,
+        train=(("train_batches", 100), ("val_batches", 10)),
         canyons="eval",
-        time_limit_s=45.0,
+        evaluate=(("time_limit_s", 45.0),),
     ),
 }
 # The paper's table at the camera's nominal 10 Hz, to compare with the calibrated rate (docs/calibration.md).
-PRESETS["nominal"] = replace(PRESETS["paper"], name="nominal", decision_hz=NOMINAL_DECISION_HZ)
+PRESETS["nominal"] = replace(retarget(PRESETS["paper"], decision_hz=NOMINAL_DECISION_HZ), name="nominal")
 # Table I in the hard canyon family (docs/hard_canyons.md): its own data, its 20 eval canyons, runs
 # long enough to reach the canyon's end; success = the end reached without a collision.
-PRESETS["hard"] = replace(
-    PRESETS["paper"],
-    name="hard",
-    runs=500,
-    subsets=(50, 200, 500),
-    canyons="hard/eval",
-    time_limit_s=FAMILIES["hard"].time_limit_s,
-    family="hard",
-)
+_HARD = retarget(PRESETS["paper"], family="hard")
+PRESETS["hard"] = replace(_HARD, name="hard", collect=replace(_HARD.collect, runs=500),
+                          subsets=(50, 200, 500))
 
 
 def get_preset(name: str) -> Sweep:

@@ -20,7 +20,6 @@ jobs: here one after the other, or on a Ray cluster one task per training and pe
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from functools import partial
@@ -28,11 +27,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, provenance, read_json, to_dict, write_json
+from depthq.configio import atomic_write_bytes, provenance, read_json, write_json
 from depthq.data.manifest import Dataset
-from depthq.data.recorder import CollectConfig, collect, collection_complete, exploration_env
+from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.errors import ConfigError
-from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import TRUNKS
@@ -94,17 +93,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     the reference policies' evaluations run on `executor` from here; on Ray, every training and
     every model's evaluation is a task of its own (`depthq.parallel.Job`)."""
     data = out / "data"
-    collect_config = CollectConfig(
-        runs=sweep.runs,
-        val_runs=sweep.val_runs,
-        max_steps=sweep.max_steps,
-        env=exploration_env(sweep.decision_hz, family=sweep.family),
-    )
-    eval_config = EvalConfig(
-        canyons=parse_canyon_set(sweep.canyons),
-        time_limit_s=sweep.time_limit_s,
-        decision_hz=sweep.decision_hz,
-    )
+    collect_config, eval_config = sweep.collect, sweep.eval_config()
     # A model in several variants (a Coll-Q-Net in a lookahead sweep, `DEPTH_ONLY`) runs once.
     models = list({m.name: m for m in sweep.models()}.values())
     configs = {m: sweep.train_config(m, str(data)) for m in models}
@@ -190,7 +179,7 @@ def _claim(out: Path, sweep: Sweep) -> None:
             )
     elif out.exists() and any(out.iterdir()):
         raise ConfigError(f"{out} exists and is not a depthq reproduce folder; use another --out")
-    write_json(marker, {"sweep": json.loads(json.dumps(to_dict(sweep))), "provenance": provenance()})
+    write_json(marker, {"sweep": sweep.record(), "provenance": provenance()})
 
 
 def run_sweep(

@@ -15,15 +15,17 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any
 
+from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
-from depthq.evaluate.online import parse_canyon_set
+from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path
 from depthq.report.layout import FOLDER_KEYS, NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
-from depthq.sim.world import DEFAULT_DECISION_HZ
+from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig
 
 Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field path, value) pairs; () is the preset's own setting
+Settings = tuple[tuple[str, Any], ...]  # (field path, value) pairs: a partial config, the rest its defaults
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
 # Settings only Depth-Q-Net has (`TrainConfig.lookahead`): a Coll-Q-Net in a variant that sets them
@@ -60,33 +62,31 @@ class Model:
 
 @dataclass(frozen=True)
 class Sweep:
-    """What `depthq sweep` (and `depthq reproduce`, for a preset) collects, trains and evaluates."""
+    """What `depthq sweep` (and `depthq reproduce`, for a preset) collects, trains and evaluates:
+    partial configs of its three stages, and the grid of models."""
 
     name: str
-    runs: int  # usable training runs collected (the largest subset)
-    val_runs: int
-    max_steps: int  # collection step limit per run
+    # The dataset: its usable training runs (the largest subset, at least), validation runs, step cap
+    # per run and world, whose canyon family and decision rate are the sweep's (its evaluations'
+    # rate too: one decision per camera frame).
+    collect: CollectConfig
     subsets: tuple[int, ...]  # nested training-set sizes (first n runs)
     seeds: tuple[int, ...]  # training seeds per (network, size, variant)
-    epochs: int | None  # None: the trainer's default budget
-    train_batches: int
-    val_batches: int
-    canyons: str  # evaluation canyon set
-    time_limit_s: float
+    # What every model's training sets (TrainConfig field paths and values); no epochs: the trainer's
+    # default budget.
+    train: Settings
+    canyons: str  # evaluation canyon set, as `depthq evaluate --canyons` takes it
+    # What every evaluation sets besides its canyons and rate (EvalConfig field paths and values).
+    evaluate: Settings = ()
     workers: int = 2
-    decision_hz: float = DEFAULT_DECISION_HZ  # collection and evaluation: one decision per camera frame
     nets: tuple[str, ...] = NETS
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
-    family: str = PAPER  # the canyon family the dataset is collected in (`canyons` may name another)
 
     def __post_init__(self) -> None:
-        if self.family not in FAMILIES:
-            raise ConfigError(
-                f"sweep {self.name}: unknown canyon family {self.family!r}; one of {sorted(FAMILIES)}"
-            )
-        parse_canyon_set(self.canyons)  # a clear error for a bad --canyons, before any work
-        if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > self.runs:
-            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{self.runs} "
+        self.eval_config()  # a clear error for a bad --canyons or evaluation setting, before any work
+        runs = self.collect.runs
+        if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > runs:
+            raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be in 1..{runs} "
                               f"(the training runs it collects, --runs)")
         if list(self.subsets) != sorted(self.subsets):  # the tables' rows: nested, smallest first
             raise ConfigError(f"sweep {self.name}: sizes {self.subsets} must be increasing, e.g. "
@@ -100,6 +100,26 @@ class Sweep:
                 raise ConfigError(f"sweep {self.name}: {values} repeats a value")
         for model in self.models():  # every variant must be a valid training, before any work
             self.train_config(model, "data")
+
+    @property
+    def family(self) -> str:
+        """The canyon family the dataset is collected in (`canyons` may name another)."""
+        return self.collect.env.world.family
+
+    @property
+    def decision_hz(self) -> float:
+        """Decisions (camera frames) per second, in collection and evaluation."""
+        return self.collect.env.world.decision_hz
+
+    @property
+    def time_limit_s(self) -> float:
+        """Seconds per evaluation run."""
+        return self.eval_config().env.time_limit_s
+
+    def eval_config(self) -> EvalConfig:
+        """How every policy of the sweep is evaluated: in `canyons`, at the data's decision rate."""
+        return build_config(EvalConfig, {"canyons": parse_canyon_set(self.canyons),
+                                         "decision_hz": self.decision_hz, **dict(self.evaluate)})
 
     def variants(self) -> list[Variant]:
         keys = [k for k, _ in self.grid]
@@ -122,22 +142,32 @@ class Sweep:
                 for m in models]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
-        budget = {} if self.epochs is None else {"epochs": self.epochs}
-        return build_config(TrainConfig, {
-            "model": model.net,
-            "data": data,
-            "runs": model.runs,
-            "seed": model.seed,
-            "train_batches": self.train_batches,
-            "val_batches": self.val_batches,
-            **(budget | dict(model.settings)),
-        })
+        own = {"model": model.net, "data": data, "runs": model.runs, "seed": model.seed}
+        return build_config(TrainConfig, own | dict(self.train) | dict(model.settings))
 
     def setup(self) -> dict[str, Any]:
-        """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent)."""
-        keep = ("runs", "val_runs", "max_steps", "epochs", "train_batches", "val_batches", "canyons",
-                "time_limit_s", "decision_hz", "family")
-        return json.loads(json.dumps({k: getattr(self, k) for k in keep}))
+        """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent), by
+        the names folders have recorded it under since sweeps were made (the dataset's manifest
+        refuses any other collection setting)."""
+        train = dict(self.train)
+        return json.loads(json.dumps({
+            "runs": self.collect.runs,
+            "val_runs": self.collect.val_runs,
+            "max_steps": self.collect.max_steps,
+            "epochs": train.get("epochs"),
+            "train_batches": train.get("train_batches"),
+            "val_batches": train.get("val_batches"),
+            "canyons": self.canyons,
+            "time_limit_s": self.time_limit_s,
+            "decision_hz": self.decision_hz,
+            "family": self.family,
+        }))
+
+    def record(self) -> dict[str, Any]:
+        """The sweep as its folder's reproduce.json and report record it: its setup and its grid."""
+        grid = {"name": self.name, "subsets": self.subsets, "seeds": self.seeds, "workers": self.workers,
+                "nets": self.nets, "grid": self.grid}
+        return {**json.loads(json.dumps(grid)), **self.setup()}
 
 
 # What a folder written before a setting was part of the setup holds for it.
@@ -151,19 +181,31 @@ def retarget(
     family's eval canyons; e.g. 'hard/val:1000-1019' to choose on val canyons) at `decision_hz`.
     Evaluation canyons of another family than the sweep's own bring their family's time limit."""
     changes: dict[str, Any] = {}
+    world = sweep.collect.env.world
     if family is not None and family != sweep.family:
         if family not in FAMILIES:
             raise ConfigError(f"--family {family!r}: unknown canyon family; one of {sorted(FAMILIES)}")
-        changes["family"] = family
+        world = world_for(world, family)
         changes["canyons"] = eval_set(family)
     if canyons is not None:
         changes["canyons"] = canyons
     if "canyons" in changes:
         target = split_family(changes["canyons"])[0]
         if target != split_family(sweep.canyons)[0]:
-            changes["time_limit_s"] = FAMILIES[target].time_limit_s
+            limit = FAMILIES[target].time_limit_s
+            changes["evaluate"] = tuple({**dict(sweep.evaluate), "time_limit_s": limit}.items())
     if decision_hz is not None:
-        changes["decision_hz"] = decision_hz
+        world = replace(world, decision_hz=decision_hz)
+    if world != sweep.collect.env.world:
+        changes["collect"] = replace(sweep.collect, env=replace(sweep.collect.env, world=world))
+    return replace(sweep, **changes)
+
+
+def widened(sweep: Sweep, runs: int | None = None, **changes: Any) -> Sweep:
+    """`sweep` collecting `runs` training runs (None: its own) with `changes` to its other fields
+    (subsets, seeds, nets, grid, name): the sizes are checked against the runs together."""
+    if runs is not None:
+        changes["collect"] = replace(sweep.collect, runs=runs)
     return replace(sweep, **changes)
 
 
