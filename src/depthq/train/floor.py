@@ -151,7 +151,7 @@ def foot_rows(floor: np.ndarray, geo: Geometry, nearest: float) -> np.ndarray:
     stop = int(np.ceil(horizon))
     free = floor[:, stop : start + 1][:, ::-1] >= 0.5  # from `start` up to the horizon
     blocked = ~free[:, :-1] & ~free[:, 1:]
-    first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), free.shape[1] - 1)
+    first = np.where(blocked.any(axis=1), blocked.argmax(axis=1), free.shape[1])  # none: the horizon
     return (start + 1 - first).astype(np.float32)  # the foot: the lower edge of the first blocked row
 
 
