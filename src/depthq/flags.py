@@ -103,7 +103,8 @@ def add_config_arguments(
     # A group per config, outer ones first: CollectConfig's own fields, then env's, env.world's, ...
     owners = {f.path.rpartition(".")[0]: f.owner for f in flags}
     order = [p for f in flags for p in _prefixes(f.path)]
-    groups = {where: _group(parser, cls, where, owners[where], only is not None)
+    but = "" if only is not None else ", ".join(exclude)
+    groups = {where: _group(parser, cls, where, owners[where], only is not None, but)
               for where in sorted(owners, key=order.index)}
     for flag in flags:
         where = flag.path.rpartition(".")[0]
@@ -217,14 +218,14 @@ def _excluded(path: str, exclude: tuple[str, ...]) -> bool:
 
 
 def _group(
-    parser: argparse.ArgumentParser, cls: type, where: str, owner: type, some: bool = False
+    parser: argparse.ArgumentParser, cls: type, where: str, owner: type, some: bool = False, but: str = ""
 ) -> argparse._ArgumentGroup:
-    """The --help group of the config at path `where` ('' for `cls` itself); `some`: not all of its
-    fields are flags."""
+    """The --help group of the config at path `where` ('' for `cls` itself); `some`: a few of its
+    fields are flags; `but`: the fields that are not."""
     if some:
         title = f"{cls.__name__}{'.' + where + ': ' + owner.__name__ if where else ''} (some fields as flags)"
     elif not where:
-        title = f"{cls.__name__} (every field a flag)"
+        title = f"{cls.__name__} (every field a flag{' but ' + but if but else ''})"
     else:
         title = f"{cls.__name__}.{where}: {owner.__name__} (--{where.replace('_', '-')}.*)"
     summary = (inspect.getdoc(owner) or "").split("\n\n")[0].replace("\n", " ")

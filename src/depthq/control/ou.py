@@ -22,10 +22,10 @@ class OUConfig:
     clipped later (`DataConfig.action_clip`), the robot's own limit is `WorldConfig.max_yaw_rate`.
     """
 
-    theta: float = 0.05
-    mu: float = 0.0
-    sigma: float = 1.0
-    scale: float = 0.3
+    theta: float = 0.05  # the pull of x back to mu, per step
+    mu: float = 0.0  # the mean x is pulled back to
+    sigma: float = 1.0  # the noise added to x per step: sigma·N(0, 1)
+    scale: float = 0.3  # the command is scale·x, rad/s
 
     def __post_init__(self) -> None:
         if not 0 <= self.theta <= 1:

@@ -37,7 +37,7 @@ KINDS = ("depth", "coll")  # Depth-Q-Net's samples and Coll-Q-Net's
 
 @dataclass(frozen=True)
 class SampleConfig:
-    """Which frames of a dataset's runs are samples, and their labels (this module's functions).
+    """Which frames of a dataset's runs are samples, and their labels (`depthq.data.labels`).
 
     The defaults are the original's: collision labels on the last `horizon` samples of every run
     (`every_run_end`), and the stored command clipped to ±`action_clip` as the action label.

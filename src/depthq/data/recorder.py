@@ -53,12 +53,12 @@ def exploration_env(
 class CollectConfig:
     """What a dataset is made of; stored in its manifest (a folder refuses a different one)."""
 
-    runs: int = 900
-    val_runs: int = 90
+    runs: int = 900  # usable training runs (data.min_frames frames at least; shorter ones are kept too)
+    val_runs: int = 90  # usable validation runs (in their own canyons)
     max_steps: int = 600  # a hard cap on steps per run ("step_limit"), beside env.time_limit_s
-    skip_frames: int = SKIP_FRAMES
-    env: EnvConfig = field(default_factory=exploration_env)
-    ou: OUConfig = field(default_factory=OUConfig)
+    skip_frames: int = SKIP_FRAMES  # the first frames of every run, driven but not stored
+    env: EnvConfig = field(default_factory=exploration_env)  # the robot's commands unclipped, 50 s runs
+    ou: OUConfig = field(default_factory=OUConfig)  # the exploration policy
     data: DataConfig = field(default_factory=DataConfig)
 
     def __post_init__(self) -> None:

@@ -68,20 +68,26 @@ RUN_FIELDS = (
 class EvalConfig:
     """How a policy is evaluated; stored in every summary."""
 
+    # The canyons driven, one run each (ids such as 'eval:3', 'hard/val:1000'), all of one family.
     canyons: tuple[str, ...] = tuple(f"eval:{i}" for i in range(N_EVAL_CANYONS))
-    time_limit_s: float | None = None  # None: the canyons' family's (45 s for the paper's)
-    seed: int = 0  # sensor noise: canyon i uses seed + i
-    # A checkpoint's weights (`depthq.nets.checkpoint.weights_stem`); None: its own (`TrainConfig.weights`).
+    # Seconds per run; none: the canyons' family's (45 s for the paper's).
+    time_limit_s: float | None = None
+    # Seeds the sensor noise and the OU policy: canyon i uses seed + i.
+    seed: int = 0
+    # A checkpoint's weights: best, last (= final) or epoch:N; none: its own (`TrainConfig.weights`).
     weights: str | None = None
-    # One decision per camera frame. None: the rate a checkpoint records (else the default).
+    # Decisions (camera frames) per second; none: the rate a checkpoint records, else the default.
     decision_hz: float | None = None
     # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
     # the runs of --no-lockstep, which drives them one after the other.
     lockstep: bool = True
-    # How a lookahead Depth-Q-Net scores its candidate sequences (docs/design.md#lookahead-selection).
-    # A one-step net's choice is the same under each rule.
+    # How a lookahead Depth-Q-Net scores its candidate sequences: discounted_nearest_bin or
+    # farthest_nearest_bin (docs/design.md#lookahead-selection). A one-step net's choice is the same
+    # under each rule.
     rule: str = "discounted_nearest_bin"
+    # The step weight's base of discounted_nearest_bin.
     discount: float = 0.9
+    # A lookahead Depth-Q-Net also scores sequences that switch action once.
     switch: bool = False
 
     def __post_init__(self) -> None:

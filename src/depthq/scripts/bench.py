@@ -14,19 +14,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="what", required=True, metavar="WHAT")
     sim = sub.add_parser("sim", help="env steps/s, camera + LiDAR at full resolution (target ≥ 120)")
     sim.add_argument("--steps", type=int, default=1000, help="steps per worker")
-    sim.add_argument("--workers", type=int, default=1)
+    sim.add_argument("--workers", type=int, default=1, help="processes, each stepping its own env")
     col = sub.add_parser(
         "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
     )
-    col.add_argument("--runs", type=int, default=20)
-    col.add_argument("--workers", type=int, default=2)
+    col.add_argument("--runs", type=int, default=20, help="runs collected (and stored) per measurement")
+    col.add_argument("--workers", type=int, default=2, help="worker processes of the second measurement")
     feat = sub.add_parser("features", help="trunk features/s end to end on a dataset's frames (≥ 300)")
     feat.add_argument("--data", type=Path, required=True, help="a dataset folder")
-    feat.add_argument("--frames", type=int, default=1024)
+    feat.add_argument("--frames", type=int, default=1024, help="dataset frames put through the trunk")
     feat.add_argument("--precision", default="fp32",
                       help="trunk precisions measured one after the other, comma-separated: fp32,bf16")
     tr = sub.add_parser("train", help="head training samples/s and its ratio to matmul FLOP/s (≥ 0.6)")
-    tr.add_argument("--seconds", type=float, default=10.0)
+    tr.add_argument("--seconds", type=float, default=10.0, help="seconds of head training measured")
     tr.add_argument("--precision", default="fp32",
                     help="precisions measured side by side, comma-separated: fp32,bf16 (train --precision)")
     tr.add_argument("--threads", type=int, default=None, help="torch threads (default: this process's cores)")
@@ -38,7 +38,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--policy", action="append", default=None,
         help="a checkpoint folder or onnx:PATH; repeat to compare (default: an untrained Depth-Q-Net)",
     )
-    pol.add_argument("--decisions", type=int, default=200)
+    pol.add_argument("--decisions", type=int, default=200, help="single decisions timed per policy")
     pol.add_argument("--batches", type=int, default=None,
                      help="act_batch calls on 20 frames, as lock-step evaluation decides for 20 canyons "
                      "(default: --decisions / 20, at least 1)")

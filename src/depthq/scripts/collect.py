@@ -10,31 +10,32 @@ from depthq.data.stats import dataset_stats, format_stats
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.parallel import add_executor_arguments, executor_from
 
-# What --help adds to CollectConfig's own comments (its nested env, OU and data configs are not flags).
-_HELP = {"runs": "usable training runs", "val_runs": "usable validation runs (their own canyons)"}
+# CollectConfig's flags as `depthq collect` spelled them before they were made from it, kept as aliases.
+_ALIASES = {"env.world.decision_hz": ("--hz",), "env.world.family": ("--family",)}
+_HELP = {"env.world.family": "docs/hard_canyons.md; its canyon generator and look are the defaults of "
+         "--env.world.canyon.* and --env.world.appearance"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
-    p.add_argument("--seed", type=int, default=0, help="collection seed (sensor and OU noise)")
-    p.add_argument("--hz", type=float, default=None, help="decisions (camera frames) per second")
-    p.add_argument(
-        "--family", default="paper", help="canyon family: paper, or hard (docs/hard_canyons.md)"
-    )
+    p.add_argument("--seed", type=int, default=0,
+                   help="collection seed: run i of a split drives its canyon with sensor and OU noise seeded "
+                   "from (seed, split, i), recorded in the manifest beside the config")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
     add_executor_arguments(p)
     from depthq.data.recorder import CollectConfig  # MuJoCo: only when this verb's flags are built
 
-    add_config_arguments(p, CollectConfig, more_help=_HELP)
+    add_config_arguments(p, CollectConfig, aliases=_ALIASES, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
     from depthq.data.recorder import CollectConfig, collect, exploration_env  # MuJoCo: when this verb runs
+    from depthq.sim.canyon import PAPER
 
-    hz = {} if args.hz is None else {"decision_hz": args.hz}
-    env = exploration_env(**hz, family=args.family)
-    config = config_from_args(CollectConfig, args, env=env)
+    # The family's world first (its canyon generator and look), then every flag given on top of it.
+    family = getattr(args, "env.world.family", PAPER)
+    config = config_from_args(CollectConfig, args, base=CollectConfig(env=exploration_env(family=family)))
     start = time.perf_counter()
     executor = executor_from(args)
     dataset = collect(args.out, config, args.seed, args.workers, args.overwrite, executor=executor)

@@ -10,8 +10,10 @@ from pathlib import Path
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats, format_label_error, format_stats, label_error
+from depthq.flags import add_config_arguments, config_from_args
 
-_DEFAULTS = DataConfig()
+# How runs are stored does not change what they count as: no flag for it here.
+_NOT_STATS = ("jpeg_quality",)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -20,10 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                "camera labels' error against the LiDAR where runs hold both")
     stats.add_argument("dir", type=Path, help="dataset folder")
     stats.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    stats.add_argument("--horizon", type=int, default=_DEFAULTS.horizon, help="collision label horizon H")
-    stats.add_argument(
-        "--min-frames", type=int, default=_DEFAULTS.min_frames, help="shorter runs are left out"
-    )
+    add_config_arguments(stats, DataConfig, exclude=_NOT_STATS)
     verify = actions.add_parser("verify", help="read every run file and check it against the manifest")
     verify.add_argument("dir", type=Path, help="dataset folder")
 
@@ -31,7 +30,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     dataset = Dataset.open(args.dir)
     if args.action == "stats":
-        stats = dataset_stats(dataset, DataConfig(horizon=args.horizon, min_frames=args.min_frames))
+        stats = dataset_stats(dataset, config_from_args(DataConfig, args))
         labels = label_error(dataset)
         if args.json:
             print(json.dumps({**stats, **({"camera_labels": labels} if labels else {})}, indent=2))

@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
 from depthq.errors import ConfigError
+from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP, resolve_device
-from depthq.sim.canyon import FAMILIES
+
+# EvalConfig's flags drive shares with `depthq evaluate`, and their spellings from before they were
+# made from it (aliases); the canyon is drive's own (one), and it drives no lock-step batch.
+_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",)}
+_HELP = {"seed": "drive seeds its one run and policy with it as it is, whatever the canyon"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,40 +25,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--canyon", default="eval:0", help="canyon id, e.g. eval:0, train:12 or hard/eval:0")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
-    p.add_argument("--seed", type=int, default=0, help="sensor-noise and policy seed")
-    p.add_argument(
-        "--time-limit", type=float, default=None,
-        help="seconds before the run is cut [the canyon family's: 45 for the paper's]",
-    )
-    p.add_argument("--hz", type=float, default=None,
-                   help="decisions (camera frames) per second [a checkpoint's: the one it records]")
-    p.add_argument("--weights", "--which", dest="weights", default=None,
-                   help="checkpoint weights: best, last or epoch:N [the checkpoint's own, train --weights]; "
-                   "--which: its old name")
     p.add_argument("--frames", type=int, default=4, help="camera frames to save, evenly spaced")
     p.add_argument("--json", action="store_true", help="print one machine-readable JSON line")
+    from depthq.evaluate.online import EvalConfig  # MuJoCo: only when this verb's flags are built
+
+    add_config_arguments(p, EvalConfig, exclude=("canyons", "lockstep"), aliases=_ALIASES, more_help=_HELP)
 
 
 def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch: when this verb runs, not at the CLI's startup
-    from depthq.evaluate.online import decision_rate
+    from depthq.evaluate.online import EvalConfig, decision_rate
     from depthq.policies.registry import make_policy
     from depthq.policies.spec import PolicySpec
-    from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
-    from depthq.sim.world import WorldConfig, world_for
+    from depthq.sim.env import CanyonEnv, parse_canyon
 
     canyon = parse_canyon(args.canyon)
     if args.frames < 0:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     device = str(resolve_device(args.device))
     spec = PolicySpec.parse(args.policy)
-    policy = make_policy(spec, seed=args.seed, weights=args.weights, device=device)
-    world = WorldConfig(decision_hz=decision_rate(spec) if args.hz is None else args.hz)
-    limit = FAMILIES[canyon.family].time_limit_s if args.time_limit is None else args.time_limit
-    env = CanyonEnv(EnvConfig(world=world_for(world, canyon.family), time_limit_s=limit))
+    config = config_from_args(EvalConfig, args, canyons=(str(canyon),))
+    if config.decision_hz is None:
+        config = replace(config, decision_hz=decision_rate(spec))
+    policy = make_policy(spec, seed=config.seed, weights=config.weights, device=device,
+                         selection=config.selection)
+    env = CanyonEnv(config.env)
+    seed = config.seed
     try:
-        obs, info = env.reset(seed=args.seed, options={"canyon": canyon})
-        policy.reset(args.seed)
+        obs, info = env.reset(seed=seed, options={"canyon": canyon})
+        policy.reset(seed)
         frames = [obs["image"].copy()]
         done = False
         while not done:

@@ -10,17 +10,9 @@ from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
 
-# EvalConfig's fields keep the flags they had before they were made from it; --canyons stays a
-# canyon set ('eval:0-4'), parsed by the verb.
+# EvalConfig's fields keep the flags they had before they were made from it, as aliases; --canyons
+# stays a canyon set ('eval:0-4'), parsed by the verb.
 _ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",)}
-_HELP = {
-    "time_limit_s": "seconds per run",
-    "weights": "best, last (= final) or epoch:N (--which: its old name)",
-    "decision_hz": "decisions per second",
-    "rule": "discounted_nearest_bin or farthest_nearest_bin",
-    "discount": "the step weight's base of discounted_nearest_bin",
-    "switch": "also score sequences that switch action once",
-}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=int, default=2, help="processes, each driving its share of the canyons")
     p.add_argument("--data", type=Path, default=None,
                    help="a checkpoint's dataset for the offline metrics, if moved [where it was trained]")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
@@ -41,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_executor_arguments(p)
     from depthq.evaluate.online import EvalConfig  # MuJoCo: only when this verb's flags are built
 
-    add_config_arguments(p, EvalConfig, exclude=("canyons",), aliases=_ALIASES, more_help=_HELP)
+    add_config_arguments(p, EvalConfig, exclude=("canyons",), aliases=_ALIASES)
 
 
 def run(args: argparse.Namespace) -> int:

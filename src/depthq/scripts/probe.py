@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from depthq.errors import ConfigError
+from depthq.flags import add_config_arguments, config_from_args
 from depthq.sim.canyon import split_family
 
 
@@ -36,8 +37,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--canyons", default="val:1000-1019",
         help="val canyons to drive in (never eval), e.g. hard/val:1000-1019",
     )
-    p.add_argument("--family", default="paper", help="canyon family of the OU statistics: paper or hard")
     p.add_argument("--out", type=Path, required=True, help="folder for probe.json and the small runs")
+    from depthq.sim.world import WorldConfig  # MuJoCo: only when this verb's flags are built
+
+    add_config_arguments(p, WorldConfig, only=("family",),
+                         more_help={"family": "the OU statistics' canyons"})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,12 +50,14 @@ def run(args: argparse.Namespace) -> int:
     if split_family(args.canyons)[1].startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")
     from depthq.evaluate.oracle import Oracle
+    from depthq.sim.world import WorldConfig
 
     parts = tuple(args.parts.split(","))
     oracles = tuple(Oracle.parse(text) for text in args.oracle.split(","))
     evaluations = tuple(Path(text) for text in args.evals.split(",") if text)
+    family = config_from_args(WorldConfig, args).family
     result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs,
-                   args.family, oracles, evaluations, args.predictions)
+                   family, oracles, evaluations, args.predictions)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "probe.json").write_text(json.dumps(result, indent=1))
     if "stats" in result:

@@ -17,7 +17,7 @@ _HELP = {
     "runs": "at least the largest size; a run's data does not depend on how many are collected, so --runs "
     "500 --sizes 200,500 trains the models the preset's 900 runs would",
     "env.world.decision_hz": "the evaluations' rate too",
-    "env.world.family": "paper or hard; the evaluation canyons become the family's eval canyons",
+    "env.world.family": "the evaluation canyons become the family's eval canyons",
 }
 
 

@@ -14,9 +14,6 @@ from depthq.train.config import MOVED_SETTINGS, TrainConfig
 
 # What --help adds to TrainConfig's own comments: the choices, and words for undocumented fields.
 _HELP = {
-    "model": "depth (Depth-Q-Net) or coll (Coll-Q-Net)",
-    "data": "dataset folder (depthq collect --out)",
-    "epochs": "epochs of train_batches training + val_batches validation batches",
     "trunk": f"one of {', '.join(sorted(TRUNKS))}",
     "depth_loss": f"one of {', '.join(DEPTH_LOSSES)}",
 }

@@ -44,12 +44,12 @@ class ObstacleConfig:
     leave no free passage of `min_gap` m beside it (across the canyon's heading α the walls are
     width·cos α apart) is left out, so the canyon stays passable."""
 
-    count: int = 0
-    radius: float = 0.3
-    height: float = 1.0
-    start: float = 4.0
-    end_margin: float = 2.0
-    min_gap: float = 1.0
+    count: int = 0  # pillars per canyon, one per stretch of it (0: none, the paper's canyons)
+    radius: float = 0.3  # of each pillar, m
+    height: float = 1.0  # of each pillar, m
+    start: float = 4.0  # m along the canyon from the spawn before the first stretch with a pillar
+    end_margin: float = 2.0  # m before the canyon's end after the last stretch with a pillar
+    min_gap: float = 1.0  # free passage, m, a pillar must leave beside it (else it is left out)
 
     def __post_init__(self) -> None:
         if self.count < 0:
@@ -65,14 +65,15 @@ class ObstacleConfig:
 class CanyonConfig:
     """Generator parameters, defaults exactly as in the original system (docs/design.md#canyons)."""
 
-    n_segments: int = 150
-    segment_length: tuple[float, float] = (0.3, 0.7)
-    heading_scale: float = math.pi / 6
-    ou_theta: float = 0.3
-    ou_sigma: float = 0.5
-    start: tuple[float, float] = (-1.5, 0.0)
-    width: float = 3.0
-    back_wall_y: float = -2.0
+    n_segments: int = 150  # straight pieces of each wall
+    segment_length: tuple[float, float] = (0.3, 0.7)  # a piece's length, m: uniform between the two
+    heading_scale: float = math.pi / 6  # a piece's heading from +y, rad, per unit of the OU sequence x
+    ou_theta: float = 0.3  # the heading sequence's pull back to straight: x += theta·(0 − x) + ...
+    ou_sigma: float = 0.5  # the heading sequence's noise: x += ... + sigma·N(0, 1)
+    start: tuple[float, float] = (-1.5, 0.0)  # where the left wall starts, x,y in m (the spawn: 0,0)
+    width: float = 3.0  # the right wall is the left one shifted this far along x, m
+    back_wall_y: float = -2.0  # y of the wall across the canyon behind the spawn, m
+    # Pillars in the way (the hard family's; none in the paper's).
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:

@@ -38,9 +38,9 @@ class EnvConfig:
     """Everything that defines an episode: the world, the sensors' post-processing, the limits."""
 
     world: WorldConfig = field(default_factory=WorldConfig)
-    bins: BinConfig = field(default_factory=BinConfig)
-    bump: BumpConfig = field(default_factory=BumpConfig)
-    time_limit_s: float = 45.0
+    bins: BinConfig = field(default_factory=BinConfig)  # the LiDAR's depth bins
+    bump: BumpConfig = field(default_factory=BumpConfig)  # the bump that ends a run
+    time_limit_s: float = 45.0  # seconds before a run is cut
 
     def __post_init__(self) -> None:
         if not self.time_limit_s > 0:

@@ -27,11 +27,11 @@ OBSTACLE_RGBA = "0.45 0.30 0.22 1"
 class CameraConfig:
     """The wide-angle camera: 410 × 308, 104° horizontal FOV, 0.24 m up on the LiDAR's axis."""
 
-    width: int = 410
-    height: int = 308
-    hfov_deg: float = 104.0
-    mount_height: float = 0.24
-    noise_std: float = 0.007  # on intensities in [0, 1]
+    width: int = 410  # frame width, pixels
+    height: int = 308  # frame height, pixels
+    hfov_deg: float = 104.0  # horizontal field of view, degrees
+    mount_height: float = 0.24  # camera height above the floor, m
+    noise_std: float = 0.007  # pixel noise's standard deviation, on intensities in [0, 1]
 
     def __post_init__(self) -> None:
         if (
@@ -56,11 +56,11 @@ class CameraConfig:
 class RobotConfig:
     """TurtleBot3 Burger (the URDF's dimensions). Frame origin: the wheel axle centre."""
 
-    wheel_radius: float = 0.033
-    wheel_separation: float = 0.160
-    length: float = 0.14
-    width: float = 0.18
-    body_height: float = 0.192
+    wheel_radius: float = 0.033  # the wheels' radius, m
+    wheel_separation: float = 0.160  # between the wheels' centres, m
+    length: float = 0.14  # the body's length (its collision box), m
+    width: float = 0.18  # the body's width (its collision box), m
+    body_height: float = 0.192  # the body's height, m
     sensor_offset_x: float = -0.032  # LiDAR (and camera) sit 3.2 cm behind the axle, as on the robot
 
 

@@ -21,11 +21,11 @@ N_RAYS = 360
 class LidarConfig:
     """LDS-01 as simulated in the original system."""
 
-    n_rays: int = N_RAYS
-    range_min: float = 0.12
-    range_max: float = 3.5
-    noise_std: float = 0.01
-    height: float = 0.172
+    n_rays: int = N_RAYS  # rays per scan, 1 degree apart (360: the only one simulated)
+    range_min: float = 0.12  # nearer returns read 0 (invalid), m
+    range_max: float = 3.5  # farther returns read inf (nothing in range), m
+    noise_std: float = 0.01  # Gaussian range noise's standard deviation, m
+    height: float = 0.172  # the scan plane's height above the floor, m
 
     def __post_init__(self) -> None:
         if self.n_rays != N_RAYS:
@@ -46,10 +46,10 @@ class BinConfig:
     clip it is far, never invalid (docs/design.md#bins). False keeps such readings out of the mean (NaN bins).
     """
 
-    first_bearing: int = 51
-    n_readings: int = 104
-    group: int = 4
-    clip: float = 2.0
+    first_bearing: int = 51  # bearing of the leftmost reading, degrees (CCW from ahead)
+    n_readings: int = 104  # readings from there clockwise, one per degree
+    group: int = 4  # readings averaged into one bin
+    clip: float = 2.0  # readings clipped to this before the mean, m
     invalid_as_far: bool = True
 
     @property
@@ -65,11 +65,11 @@ class BumpConfig:
     bump check started together (`grace_s` > 0 delays the check after the start of driving).
     """
 
-    half_angle: int = 45
-    group: int = 4
-    clip: float = 1.0
-    threshold: float = 0.2
-    grace_s: float = 0.0
+    half_angle: int = 45  # readings within ±this of ahead, degrees
+    group: int = 4  # readings averaged into one value
+    clip: float = 1.0  # readings clipped to this before the mean, m
+    threshold: float = 0.2  # a bump: the smallest mean below this, m
+    grace_s: float = 0.0  # seconds after the start of driving before the bump check starts
 
 
 def ray_directions(n_rays: int = N_RAYS) -> np.ndarray:

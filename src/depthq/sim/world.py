@@ -35,19 +35,19 @@ TURTLEBOT3_MAX_YAW_RATE = 2.84  # rad/s, the Burger's maximum angular velocity
 class WorldConfig:
     """Everything physical: canyon generator, robot, sensors, rates and look."""
 
-    canyon: CanyonConfig = field(default_factory=CanyonConfig)
+    canyon: CanyonConfig = field(default_factory=CanyonConfig)  # the canyon generator
     robot: RobotConfig = field(default_factory=RobotConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
-    speed: float = 0.5  # m/s, constant
+    speed: float = 0.5  # forward speed, m/s, constant
     max_yaw_rate: float = 1.0  # rad/s; commanded yaw rates are clipped to ±this
-    # One decision per camera frame. The original camera is nominally 10 Hz, but the rate at which
-    # its frames were really saved is unknown; DEFAULT_DECISION_HZ is calibrated to Table II
-    # (docs/calibration.md).
+    # Decisions (camera frames) per second, one decision per frame (docs/calibration.md). The
+    # original camera is nominally 10 Hz, but the rate at which its frames were really saved is
+    # unknown; DEFAULT_DECISION_HZ is calibrated to Table II.
     decision_hz: float = DEFAULT_DECISION_HZ
-    physics_dt: float = 0.005
-    appearance: str = "default"
-    # The canyon family whose canyons `canyon` generates (`depthq.sim.canyon.FAMILIES`, `world_for`).
+    physics_dt: float = 0.005  # MuJoCo's time step, s; a decision's period is a whole number of them
+    appearance: str = "default"  # the walls' look: default, or randomized per canyon (the hard family's)
+    # The canyon family whose canyons `canyon` generates: paper or hard (`depthq.sim.canyon.FAMILIES`).
     family: str = field(default=PAPER, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:

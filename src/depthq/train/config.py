@@ -66,13 +66,13 @@ class TrainConfig:
     `lr` None means the paper's rate for `model`; read the effective one from `learning_rate`.
     """
 
-    model: str
-    data: str
+    model: str  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
+    data: str  # the dataset folder (depthq collect --out)
     # The first n usable training runs (the paper's nested subsets); none: all of them.
     runs: int | None = None
     # Seeds the head's initialisation and the batches drawn (the same seed, the same weights).
     seed: int = 0
-    epochs: int = DEFAULT_EPOCHS
+    epochs: int = DEFAULT_EPOCHS  # each of train_batches training then val_batches validation batches
     # Training batches per epoch.
     train_batches: int = 100
     # Validation batches per epoch (the best weights are those of the lowest validation loss).
@@ -87,7 +87,7 @@ class TrainConfig:
     eps: float = EPS
     # L2 weight decay of the head's weights (the original's).
     weight_decay: float = WEIGHT_DECAY
-    trunk: str = DEFAULT_TRUNK  # see depthq.nets.trunk
+    trunk: str = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.nets.trunk)
     # Dropout on the feature; the paper's 0.5 blurs a frozen feature's predictions
     # (docs/deviations.md#dropout).
     dropout: float = 0.0
@@ -96,7 +96,7 @@ class TrainConfig:
     action_scale: float = 10.0
     # Side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
-    depth_loss: str = "original"  # `depthq.nets.losses.depth_l1_loss`
+    depth_loss: str = "original"  # Depth-Q-Net's L1 loss over the bins (`depthq.nets.losses.depth_l1_loss`)
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
     # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's
     # collision-label window (5 frames) and also sets which samples Depth-Q-Net drops: the two are

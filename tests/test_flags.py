@@ -1,0 +1,220 @@
+"""The verbs' flags are made from their configs (`depthq.flags`): every field of every verb's configs,
+nested ones included (dotted: --samples.horizon, --env.world.decision-hz), is a flag with a help text;
+every other flag has one too; and the spellings the flags had before (#33) parse to the same config."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import typing
+from pathlib import Path
+
+import pytest
+
+from depthq.cli import VERBS, build_parser
+from depthq.flags import build_config, config_from_args
+
+# Each verb's configs: (verb path, config class, fields it leaves to a flag of its own or has no use
+# for, and the fields it takes alone when it sets a few of a config it does not build itself).
+VERB_CONFIGS = [
+    (("train",), "depthq.train.config:TrainConfig", (), None),
+    (("collect",), "depthq.data.recorder:CollectConfig", (), None),
+    (("evaluate",), "depthq.evaluate.online:EvalConfig", ("canyons",), None),  # --canyons: a canyon set
+    (("drive",), "depthq.evaluate.online:EvalConfig", ("canyons", "lockstep"), None),  # --canyon: one
+    (("labeller",), "depthq.train.labeller:LabellerConfig", (), None),
+    (("dataset", "stats"), "depthq.data:DataConfig", ("jpeg_quality",), None),  # storage: not a count
+    (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
+                                                            "env.world.family")),
+    (("probe",), "depthq.sim.world:WorldConfig", (), ("family",)),
+]
+
+
+def _class(spec: str) -> type:
+    module, _, name = spec.partition(":")
+    return getattr(__import__(module, fromlist=[name]), name)
+
+
+def _paths(cls: type, prefix: str = "") -> list[str]:
+    """Every field of `cls`, nested configs' fields by dotted path (read here, not from depthq.flags)."""
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        if dataclasses.is_dataclass(hints[f.name]):
+            out += _paths(hints[f.name], f"{prefix}{f.name}.")
+        else:
+            out.append(prefix + f.name)
+    return out
+
+
+def _parser(path: tuple[str, ...]) -> argparse.ArgumentParser:
+    """The parser of a verb (or of a verb's action, e.g. dataset stats)."""
+    parser = build_parser(path[0])
+    for name in path:
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = sub.choices[name]
+    return parser
+
+
+def _all_parsers(parser: argparse.ArgumentParser, name: str) -> list[tuple[str, argparse.ArgumentParser]]:
+    out = [(name, parser)]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub_name, sub in action.choices.items():
+                out += _all_parsers(sub, f"{name} {sub_name}")
+    return out
+
+
+@pytest.mark.parametrize(("verb", "spec", "exclude", "only"), VERB_CONFIGS,
+                         ids=[" ".join(v[0]) for v in VERB_CONFIGS])
+def test_every_field_of_a_verbs_configs_is_a_flag_with_help(verb, spec, exclude, only) -> None:
+    parser = _parser(verb)
+    options = parser._option_string_actions
+    paths = _paths(_class(spec))
+    assert set(exclude) <= set(paths) and set(only or ()) <= set(paths)
+    for path in paths:
+        if path in exclude or (only is not None and path not in only):
+            continue
+        flag = "--" + path.replace("_", "-")
+        assert flag in options, f"{' '.join(verb)}: no flag {flag}"
+        action = options[flag]
+        assert action.dest == path and action.help and action.help != argparse.SUPPRESS, flag
+        assert len(action.help.split("(default")[0].strip()) > 10, f"{flag}: {action.help!r} says nothing"
+
+
+def test_every_flag_of_every_verb_says_what_it_does() -> None:
+    """Options and positionals alike, of every verb and every verb's actions; a flag's other spelling
+    (--field_name) is hidden, but the flag it spells has its help."""
+    for verb in VERBS:
+        for name, parser in _all_parsers(_parser((verb,)), verb):
+            shown = {}
+            for action in parser._actions:
+                if isinstance(action, argparse._HelpAction | argparse._SubParsersAction):
+                    continue
+                if action.help != argparse.SUPPRESS:
+                    shown.setdefault(action.dest, []).append(action.help)
+            for action in parser._actions:
+                if isinstance(action, argparse._HelpAction | argparse._SubParsersAction):
+                    continue
+                helps = shown.get(action.dest, [])
+                assert helps and all(h and h.strip() for h in helps), f"{name}: {action.option_strings} " \
+                    f"({action.dest}) has no help"
+
+
+def test_train_help_lists_nested_fields_as_dotted_flags(capsys: pytest.CaptureFixture[str]) -> None:
+    from depthq.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    out = capsys.readouterr().out
+    assert "TrainConfig.samples: SampleConfig (--samples.*)" in out
+    for flag in ("--samples.horizon", "--samples.min-frames", "--samples.every-run-end",
+                 "--no-samples.every-run-end", "--samples.action-clip", "--samples.action-lag"):
+        assert flag in out, flag
+
+
+def _train(argv: list[str]):
+    from depthq.train.config import TrainConfig
+
+    args = build_parser("train").parse_args(["train", "--model", "coll", "--data", "d", "--out", "o", *argv])
+    return config_from_args(TrainConfig, args)
+
+
+def test_the_flat_train_spellings_parse_to_the_same_config() -> None:
+    """TrainConfig held its sample settings itself until #33: --horizon is --samples.horizon, for one
+    release, in either spelling."""
+    from depthq.data.labels import SampleConfig
+
+    dotted = _train(["--samples.horizon", "3", "--samples.min-frames", "30", "--no-samples.every-run-end",
+                     "--samples.action-clip", "0.5", "--samples.action-lag", "1"])
+    assert dotted.samples == SampleConfig(horizon=3, min_frames=30, every_run_end=False, action_clip=0.5,
+                                          action_lag=1)
+    for flat in (["--horizon", "3", "--min-frames", "30", "--no-every-run-end", "--action-clip", "0.5",
+                  "--action-lag", "1"],
+                 ["--horizon", "3", "--min_frames", "30", "--no-every_run_end", "--action_clip", "0.5",
+                  "--action_lag", "1"],
+                 ["--samples.horizon", "3", "--samples.min_frames", "30", "--no-every-run-end",
+                  "--action-clip", "0.5", "--samples.action_lag", "1"]):
+        assert _train(flat) == dotted, flat
+    assert _train([]).samples == SampleConfig()
+
+
+def test_the_old_verb_spellings_parse_to_the_same_config() -> None:
+    """collect's --hz and --family, evaluate's and drive's --hz, --time-limit and --which: aliases of
+    the flags made from the configs."""
+    from depthq.data.recorder import CollectConfig, exploration_env
+    from depthq.evaluate.online import EvalConfig
+    from depthq.scripts.collect import run  # noqa: F401  (the verb's module builds its config as below)
+
+    def collect(argv: list[str]) -> CollectConfig:
+        args = build_parser("collect").parse_args(["collect", "--out", "o", *argv])
+        family = getattr(args, "env.world.family", "paper")
+        return config_from_args(CollectConfig, args, base=CollectConfig(env=exploration_env(family=family)))
+
+    expected = CollectConfig(runs=3, env=exploration_env(10.0, family="hard"))
+    assert collect(["--runs", "3", "--hz", "10", "--family", "hard"]) == expected
+    assert collect(["--runs", "3", "--env.world.decision-hz", "10", "--env.world.family", "hard"]) == expected
+    assert collect([]) == CollectConfig()
+    for verb, argv in (("evaluate", ["heuristic", "--out", "o"]), ("drive", ["--out", "o"])):
+        old = build_parser(verb).parse_args([verb, *argv, "--hz", "10", "--time-limit", "5",
+                                             "--which", "last"])
+        new = build_parser(verb).parse_args([verb, *argv, "--decision-hz", "10", "--time-limit-s", "5",
+                                             "--weights", "last"])
+        configs = [config_from_args(EvalConfig, a, canyons=("eval:0",)) for a in (old, new)]
+        assert configs[0] == configs[1] == EvalConfig(canyons=("eval:0",), decision_hz=10.0,
+                                                       time_limit_s=5.0, weights="last")
+
+
+def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
+    """--set horizon=2 is --set samples.horizon=2, and the model folder keeps the name it had."""
+    from depthq.report.presets import get_preset
+    from depthq.report.sweep import parse_setting, widened
+
+    assert parse_setting("horizon=2,5") == parse_setting("samples.horizon=2,5") == ("samples.horizon", (2, 5))
+    sweep = widened(get_preset("smoke"), nets=("coll",), grid=(parse_setting("horizon=2,5"),))
+    assert [m.name for m in sweep.models()] == ["coll_n3_s0_horizon2", "coll_n6_s0_horizon2", "coll_n3_s0",
+                                                "coll_n6_s0"]
+    assert sweep.train_config(sweep.models()[0], "d").samples.horizon == 2
+
+
+def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> None:
+    from depthq.data.recorder import CollectConfig
+    from depthq.errors import ConfigError
+
+    config = build_config(CollectConfig, {"runs": 3, "env.world.decision_hz": 10.0, "data.horizon": 2})
+    assert (config.runs, config.env.world.decision_hz, config.data.horizon) == (3, 10.0, 2)
+    assert config.env.world.max_yaw_rate == CollectConfig().env.world.max_yaw_rate  # the enclosing default
+    with pytest.raises(ConfigError, match="no setting nothing"):
+        build_config(CollectConfig, {"env.nothing": 1})
+
+
+def test_no_setting_is_declared_twice() -> None:
+    """TrainConfig holds a SampleConfig instead of mirroring its fields, and a sweep its stages' configs:
+    none of their fields is a field of the sweep (its `canyons` is the canyon set evaluate's --canyons
+    takes, which EvalConfig holds as the canyons it names)."""
+    from depthq.data.labels import SampleConfig
+    from depthq.data.recorder import CollectConfig
+    from depthq.evaluate.online import EvalConfig
+    from depthq.report.sweep import Sweep
+    from depthq.train.config import TrainConfig
+
+    def names(cls: type) -> set[str]:
+        return {f.name for f in dataclasses.fields(cls)}
+
+    assert not names(TrainConfig) & names(SampleConfig)
+    assert not names(Sweep) & (names(CollectConfig) | names(TrainConfig) | names(EvalConfig) - {"canyons"})
+
+
+def test_verbs_are_found_here(tmp_path: Path) -> None:
+    """Every verb with a config class is in VERB_CONFIGS (a verb given one later is checked too)."""
+    import ast
+    import inspect
+
+    import depthq.scripts
+
+    root = Path(inspect.getfile(depthq.scripts)).parent
+    listed = {v[0][0] for v in VERB_CONFIGS}
+    for verb, module in VERBS.items():
+        source = (root / f"{module}.py").read_text()
+        calls = [n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Call)
+                 and getattr(n.func, "id", "") == "add_config_arguments"]
+        assert not calls or verb in listed, verb
