@@ -15,6 +15,7 @@ from safetensors.torch import load_file
 
 from depthq.cli import main
 from depthq.configio import read_json
+from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
@@ -159,6 +160,19 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     resumed = train(_config(data, epochs=2, head_form="concat", weights="final"), renamed, progress=False)
     assert resumed == renamed
     assert read_json(renamed / "config.json")["train"]["weights"] == "final"
+
+    # Version 3 before #33 nested TrainConfig's sample settings in `train.samples`: read there, so a
+    # sweep reuses the folder, and a training that labels otherwise is told which setting differs.
+    flat = tmp_path / "v3-flat"
+    shutil.copytree(out, flat)
+    flat_train = {k: v for k, v in record["train"].items() if k != "samples"} | record["train"]["samples"]
+    assert "horizon" in flat_train and "samples" not in flat_train
+    (flat / "config.json").write_text(json.dumps({**record, "train": flat_train}))
+    assert read_config(flat)["train"] == record["train"]
+    assert load_qnet(flat)[1]["train"]["samples"]["horizon"] == 5
+    assert _trained(_config(data, epochs=1, head_form="concat"), flat)
+    with pytest.raises(ConfigError, match=r"differs in: samples\.horizon\)"):
+        _trained(_config(data, epochs=1, head_form="concat", samples=SampleConfig(horizon=3)), flat)
 
     # Version 2, the layout before `dataset` and `policy`: its rate from its dataset's manifest.
     old = tmp_path / "v2"

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-from depthq.evaluate.online import EvalConfig, decision_rate, drive_canyons
+from depthq.evaluate.online import EvalConfig, at_policy_rate, drive_canyons
 from depthq.nets.device import resolve_device
 from depthq.policies.spec import PolicySpec
 
@@ -23,7 +23,7 @@ def bench_evaluate(
     start (processes, policy, simulators) and every run, no files written, no offline metric."""
     where = str(resolve_device(device))
     spec = PolicySpec.parse(spec).resolved()
-    config = EvalConfig(canyons=canyons, time_limit_s=time_limit_s, decision_hz=decision_rate(spec))
+    config = at_policy_rate(EvalConfig(canyons=canyons, time_limit_s=time_limit_s), spec)
     seconds, runs = {}, {}
     for name, lockstep in (("sequential", False), ("lockstep", True)):
         start = time.perf_counter()

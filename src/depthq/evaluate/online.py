@@ -116,6 +116,13 @@ class EvalConfig:
         return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
 
 
+def at_policy_rate(config: EvalConfig, policy_spec: str | PolicySpec) -> EvalConfig:
+    """`config`, at the policy's decision rate (`decision_rate`) when it names none."""
+    if config.decision_hz is not None:
+        return config
+    return replace(config, decision_hz=decision_rate(policy_spec))
+
+
 def decision_rate(policy_spec: str | PolicySpec) -> float:
     """The decision rate a checkpoint records (its training data's); the default for any other policy."""
     checkpoint = PolicySpec.parse(policy_spec).checkpoint
@@ -296,8 +303,7 @@ def evaluate(
         policy_spec = policy_spec.resolved()
         executor.check_shared(policy_spec.checkpoint)
         dataset = training_data(read_config(policy_spec.checkpoint), data)
-    if config.decision_hz is None:
-        config = replace(config, decision_hz=decision_rate(policy_spec))
+    config = at_policy_rate(config, policy_spec)
     start = time.perf_counter()
     ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch: when this verb runs, not at the CLI's startup
-    from depthq.evaluate.online import EvalConfig, decision_rate
+    from depthq.evaluate.online import EvalConfig, at_policy_rate
     from depthq.policies.registry import make_policy
     from depthq.policies.spec import PolicySpec
     from depthq.sim.env import CanyonEnv, parse_canyon
@@ -44,9 +43,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--frames must be >= 0, got {args.frames}")
     device = str(resolve_device(args.device))
     spec = PolicySpec.parse(args.policy)
-    config = config_from_args(EvalConfig, args, canyons=(str(canyon),))
-    if config.decision_hz is None:
-        config = replace(config, decision_hz=decision_rate(spec))
+    config = at_policy_rate(config_from_args(EvalConfig, args, canyons=(str(canyon),)), spec)
     policy = make_policy(spec, seed=config.seed, weights=config.weights, device=device,
                          selection=config.selection)
     env = CanyonEnv(config.env)
