@@ -76,8 +76,8 @@ BEYOND = (
     Rung("Depth-Q-Net lookahead 5", ("lookahead=5",), nets=("depth",), seeds=(0,)),
     Rung("Depth-Q-Net lookahead 5, 10 Hz", ("lookahead=5",), nets=("depth",), hz=10.0, seeds=(0,)),
     Rung("paper-size head (PCA to 256)", ("feature_projection=256",), seeds=(0,)),
-    Rung("Coll-Q-Net label 1 frame (0.25 s)", ("horizon=1",), nets=("coll",)),
-    Rung("Coll-Q-Net label 2 frames (0.5 s)", ("horizon=2",), nets=("coll",)),
+    Rung("Coll-Q-Net label 1 frame (0.25 s)", ("samples.horizon=1",), nets=("coll",)),
+    Rung("Coll-Q-Net label 2 frames (0.5 s)", ("samples.horizon=2",), nets=("coll",)),
 )
 
 
@@ -211,7 +211,7 @@ def table(ladder: Ladder, out: Path) -> int:
 
 
 # The setting that says how far each network's training signal looks ahead, in frames, and its default.
-HORIZON_SETTING = {"depth": ("lookahead", 1), "coll": ("horizon", HORIZON)}
+HORIZON_SETTING = {"depth": ("lookahead", 1), "coll": ("samples.horizon", HORIZON)}
 
 
 def _looks_ahead(rung: Rung, net: str) -> float | None:

@@ -43,7 +43,7 @@ class Candidate:
 CANDIDATES = (
     Candidate("Coll-Q-Net, for scale", net="coll"),
     Candidate("Depth-Q-Net, today's default"),
-    Candidate("keep the samples before each run's end (horizon 1)", ("horizon=1",)),
+    Candidate("keep the samples before each run's end (horizon 1)", ("samples.horizon=1",)),
     Candidate("head width 1024", ("hidden=1024",)),
     Candidate("per-action head (scene and action apart)", ("head_form=per_action",)),
     Candidate("4 × 4 grid feature, head width 1024", ("trunk=efficientnet_lite0_grid", "hidden=1024")),
