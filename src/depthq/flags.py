@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import functools
 import inspect
 import io
 import re
@@ -175,6 +176,7 @@ def get_path(config: Any, path: str) -> Any:
     return config
 
 
+@functools.cache
 def field_help(cls: type) -> dict[str, str]:
     """Each field's help: the first sentence of the comment block above it and the comment beside
     it, else the class docstring's sentences that start with `field`."""
