@@ -83,6 +83,11 @@ class Sweep:
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
 
     def __post_init__(self) -> None:
+        for what, settings, own in (("train", self.train, NOT_IN_GRID),
+                                    ("evaluate", self.evaluate, ("canyons", "decision_hz"))):
+            mine = sorted(set(dict(settings)) & set(own))
+            if mine:
+                raise ConfigError(f"sweep {self.name}: {what} settings {mine} are the sweep's own")
         self.eval_config()  # a clear error for a bad --canyons or evaluation setting, before any work
         runs = self.collect.runs
         if not self.subsets or min(self.subsets) < 1 or max(self.subsets) > runs:
