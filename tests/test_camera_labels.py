@@ -27,7 +27,8 @@ from depthq.train.labeller import (
     train_labeller,
 )
 
-TOY_LABELLER = {"method": "perception", "hidden": 64, "steps": 40, "batch_size": 16, "lr": 1.0, "input_size": 64}
+TOY_LABELLER = {"method": "perception", "hidden": 64, "steps": 40, "batch_size": 16, "lr": 1.0,
+                "input_size": 64}
 TOY_TRAINING = {"epochs": 2, "train_batches": 4, "val_batches": 1, "batch_size": 16}
 
 

@@ -31,8 +31,8 @@ def run(args: argparse.Namespace) -> int:
     record = read_json(out / CONFIG)
     family = record["source"]["family"]
     if record["name"] == "floor":
-        print(f"labeller: {out} (floor, fingerprint {record['fingerprint'][:16]}…), learnt from the {family!r} "
-              f"family's camera and odometry; training loss {record['losses'][0]:.3f} → "
+        print(f"labeller: {out} (floor, fingerprint {record['fingerprint'][:16]}…), learnt from the "
+              f"{family!r} family's camera and odometry; training loss {record['losses'][0]:.3f} → "
               f"{record['losses'][-1]:.3f}, val loss {record['val_loss']:.3f}")
         print(f"label a dataset of this camera with: depthq label DATA --from camera --labeller {out}")
     else:

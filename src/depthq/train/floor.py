@@ -32,6 +32,9 @@ from depthq.sim.sensors import BinConfig
 BATCH = 32  # frames per forward pass
 DILATIONS = (1, 2, 4, 8)
 RECEPTIVE_RADIUS = sum(DILATIONS)  # pixels each side that a floor logit sees
+CONTEXT_GRID = (2, 4)  # rows × columns of the context's colour grid
+CONTEXT_BAND = 0.3  # the lowest fraction of a frame's rows that the context averages
+CONTEXT = 3 * CONTEXT_GRID[0] * CONTEXT_GRID[1]
 
 
 @dataclass(frozen=True)
@@ -125,10 +128,13 @@ def reduce(frames: np.ndarray, scale: int) -> np.ndarray:
 
 
 class FloorNet(nn.Module):
-    """Reduced frame (B, 3, H, W) → floor logit (B, H, W): dilated 3×3 convolutions, a receptive field
-    of 2 × RECEPTIVE_RADIUS + 1 pixels, so a pixel is judged by the edges around it, not its colour alone."""
+    """Reduced frame (B, 3, H, W) and its context (B, CONTEXT) → floor logit (B, H, W): dilated 3×3
+    convolutions, a receptive field of 2 × RECEPTIVE_RADIUS + 1 pixels, so a pixel is judged by the edges
+    around it, not its colour alone; the context (`context_of`: the colours of the floor ahead, in the
+    frame's lower band), where wanted, shifts the first layer, so that what floor looks like can differ
+    canyon by canyon."""
 
-    def __init__(self, width: int = 32) -> None:
+    def __init__(self, width: int, context: bool = True) -> None:
         super().__init__()
         layers: list[nn.Module] = []
         channels = 3
@@ -137,9 +143,20 @@ class FloorNet(nn.Module):
             channels = width
         layers.append(nn.Conv2d(width, 1, 1))
         self.body = nn.Sequential(*layers)
+        self.context = nn.Linear(CONTEXT, width) if context else None
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.body(x - 0.5)[:, 0]
+    def forward(self, x: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
+        h = self.body[0](x - 0.5)  # the first convolution, before its ReLU
+        if self.context is not None:
+            h = h + self.context(context - 0.5)[:, :, None, None]
+        return self.body[1:](h)[:, 0]
+
+
+def context_of(frames: torch.Tensor) -> torch.Tensor:
+    """Reduced whole frames (B, 3, H, W) → (B, CONTEXT): the mean colours of a 2 × 4 grid over the lowest
+    CONTEXT_BAND of the rows (the floor just ahead, in most frames)."""
+    band = frames[:, :, int(frames.shape[2] * (1 - CONTEXT_BAND)) :]
+    return F.adaptive_avg_pool2d(band, CONTEXT_GRID).flatten(1)
 
 
 def foot_rows(floor: np.ndarray, geo: Geometry, nearest: float) -> np.ndarray:
@@ -180,9 +197,9 @@ class FloorEstimate:
     def __call__(self, frames: np.ndarray) -> np.ndarray:
         out = []
         for i in range(0, len(frames), BATCH):
-            x = torch.from_numpy(reduce(frames[i : i + BATCH], self.geo.scale)[:, :, self.top :])
+            x = torch.from_numpy(reduce(frames[i : i + BATCH], self.geo.scale))
             p = np.zeros((len(x), *self.geo.shape), np.float32)
-            p[:, self.top :] = torch.sigmoid(self.net(x)).numpy()
+            p[:, self.top :] = torch.sigmoid(self.net(x[:, :, self.top :], context_of(x))).numpy()
             out.append(self.geo.bins_of(foot_rows(p, self.geo, self.nearest)))
         return np.concatenate(out).astype(np.float32)
 
@@ -208,7 +225,8 @@ def _pool(dataset: Dataset, entries: list[RunEntry], geo: Geometry, config: Any,
 def _loss(net: FloorNet, images: np.ndarray, masks: np.ndarray, above: torch.Tensor,
           device: torch.device) -> torch.Tensor:
     """Footprint pixels are floor, pixels above the horizon are not: the mean of both classes' BCE."""
-    logit = net(torch.from_numpy(images.astype(np.float32)).to(device))
+    x = torch.from_numpy(images.astype(np.float32)).to(device)
+    logit = net(x, context_of(x))
     floor_ = torch.from_numpy(masks).to(device)
     return (F.softplus(-logit[floor_]).mean() + F.softplus(logit[:, above]).mean()) / 2
 
@@ -221,7 +239,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
     val_pool = _pool(dataset, dataset.entries("val"), geo, replace(config, pool_frames=1), rng, False)
     above = torch.zeros(geo.shape, dtype=torch.bool, device=device)
     above[: int(geo.shape[0] / 2) - 1] = True
-    net = FloorNet(config.width).to(device)
+    net = FloorNet(config.width, config.context).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
     losses = []
     for _ in tqdm(range(config.steps), desc="train floor", unit="step", disable=not progress):

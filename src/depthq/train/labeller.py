@@ -82,6 +82,9 @@ class LabellerConfig:
     scale: int = 2
     # floor: channels of the floor net's layers.
     width: int = 16
+    # floor: the context branch, the colours of the floor ahead shifting the first layer (what floor looks
+    # like differs canyon by canyon in the hard family's randomised look).
+    context: bool = True
     # floor: the next poses whose footprint is free floor (12: 3 s at 4 Hz, 1.5 m at 0.5 m/s).
     lookahead: int = 12
     # floor: floor nearer than this (m ahead of the camera) is neither learnt nor judged.
@@ -192,7 +195,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
         net, losses, val = floor.train(dataset, geo, config, progress, device)
         identity = {"method": "floor", "scale": config.scale, "nearest": config.nearest,
                     "width": config.width, "geometry": floor.geometry_record(geo),
-                    "bins": bin_geometry(dataset)}
+                    "bins": bin_geometry(dataset), **({"context": True} if config.context else {})}
         results = {"val_loss": round(val, 6)}
     else:
         net, losses, val = _train_perception(dataset, config, progress, device)
@@ -238,9 +241,12 @@ def _train_perception(dataset: Dataset, config: LabellerConfig, progress: bool, 
 
 
 def _config_record(record: dict[str, Any]) -> dict[str, Any]:
-    """A labeller record's config, upgraded: one written before `method` existed is a perception one."""
+    """A labeller record's config, upgraded: one written before `method` existed is a perception one, a
+    floor one written before `context` existed has none."""
     config = dict(record["config"])
     config.setdefault("method", "perception")
+    if config["method"] == "floor":
+        config.setdefault("context", False)
     return to_dict(from_dict(LabellerConfig, config))
 
 
@@ -261,8 +267,9 @@ def load_labeller(folder: Path) -> Labeller:
     config = from_dict(LabellerConfig, _config_record(record))
     tensors, metadata = read_weights(folder / WEIGHTS)
     if config.method == "floor":
-        net: nn.Module = floor.FloorNet(config.width)
-        identity = {key: record[key] for key in ("method", "scale", "nearest", "width", "geometry", "bins")}
+        net: nn.Module = floor.FloorNet(config.width, config.context)
+        keys = ("method", "scale", "nearest", "width", "geometry", "bins", "context")
+        identity = {key: record[key] for key in keys if key in record}
     else:
         net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
         identity = _identity(config.trunk, config.input_size, record["bins"])
