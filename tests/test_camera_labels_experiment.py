@@ -43,7 +43,7 @@ def test_the_experiment_labels_a_copy_trains_drives_tabulates_and_resumes(
 
     setup = json.loads((out / "setup.json").read_text())
     assert setup == {"sweep": str(smoke.resolve()), "family": "paper", "canyons": "val:1000",
-                     "time_limit_s": 5.0, "weights": "last"}
+                     "time_limit_s": 5.0, "weights": None}
     labeller = json.loads((out / "floor" / "labeller" / "config.json").read_text())
     assert labeller["name"] == "floor" and labeller["config"]["steps"] == 5
     assert labeller["config"]["data"] == str((smoke / "data").resolve())  # learnt on the data it labels
@@ -70,7 +70,7 @@ def test_the_experiment_labels_a_copy_trains_drives_tabulates_and_resumes(
     summaries = {}
     for name, folder in evaluations.items():
         result = _summary(folder)
-        assert result["config"]["canyons"] == ["val:1000"] and result["config"]["weights"] == "last"
+        assert result["config"]["canyons"] == ["val:1000"] and result["config"]["weights"] is None
         assert result["config"]["time_limit_s"] == 5.0 and not (folder / "video.mp4").exists()
         summaries[name] = result["summary"]
 

@@ -20,7 +20,7 @@ OUT holds one sweep's experiment, every labeller's beside the others:
     OUT/<method>/models/depth_n<N>_s<S>/  the camera-label Depth-Q-Nets: the sweep's training of that
                                       name (its settings; TrainConfig's defaults where it has none) with
                                       labels "camera", and `--set` on top
-    OUT/<method>/eval/depth_n<N>_s<S>/    their evaluations (`--which last`, no video)
+    OUT/<method>/eval/depth_n<N>_s<S>/    their evaluations (their own default weights, no video)
     OUT/lidar/eval/<net>_n<N>_s<S>/   the sweep's own Depth-Q-Net and Coll-Q-Net in the same canyons
 
 The labellers: `floor` (camera and odometry only: learns on the dataset it labels, SWEEP/data by
@@ -66,7 +66,9 @@ from depthq.train.trainer import train
 
 PROG = "python -m depthq.experiments.camera_labels"
 VAL = "val:1000-1019"  # a family's val canyons, far from its datasets' val runs (val:0..89)
-WEIGHTS = "last"  # every evaluation here drives the last epoch's weights
+# Every evaluation drives each checkpoint's own default weights (a depth-first Depth-Q-Net's final ones,
+# Coll-Q-Net's best: docs/design.md), so that no network is weakened for the comparison.
+WEIGHTS = None
 SETUP = "setup.json"
 LIDAR = "lidar"  # OUT/lidar/eval: the sweep's own models, trained on the LiDAR's bins and the bump
 REFERENCES = ("depth", "coll")  # the sweep's networks each camera-label Depth-Q-Net is compared with
@@ -96,7 +98,7 @@ class Setup:
         self.eval_config()  # a bad canyon set or time limit: an error before any work
 
     def eval_config(self) -> EvalConfig:
-        """Each policy once in every canyon, its last epoch's weights, at its data's decision rate."""
+        """Each policy once in every canyon, its own default weights, at its data's decision rate."""
         return EvalConfig(canyons=parse_canyon_set(self.canyons), time_limit_s=self.time_limit_s,
                           weights=WEIGHTS)
 
