@@ -7,7 +7,8 @@ workers that keep an expensive state between tasks (a MuJoCo world with its EGL 
 policy). It takes a picklable `make_worker()` that builds that state and returns a callable
 `worker(task) -> result` with a `close()`, and yields `(position, result)` as tasks finish:
 
-- `local`: `workers` spawned processes on this machine (spawned: EGL contexts do not survive a fork);
+- `local`: `workers` processes on this machine, forked from a server process that imported the
+  workers' modules once (`worker_context`) and never rendered (EGL contexts do not survive a fork);
 - `ray`: `workers` Ray actors of one CPU each, on the cluster at `address` (None: a Ray started on
   this machine); an actor whose node dies is restarted elsewhere and its task retried.
 
@@ -160,8 +161,24 @@ def _portable(err: BaseException) -> BaseException | None:
     return err
 
 
+# What a local worker imports (torch, MuJoCo, matplotlib: ~3 s a process), imported once per process
+# in the fork server rather than again in every worker.
+_PRELOAD = ["depthq.evaluate.online", "depthq.data.recorder"]
+
+
+def worker_context() -> mp.context.BaseContext:
+    """The start method of local workers: `forkserver`. The server is a fresh interpreter (as a spawned
+    worker is: no EGL context, no threads of this process) that imports `_PRELOAD` once; each worker is
+    a fork of it, so it starts in milliseconds instead of importing torch again. A worker sees this
+    process's working directory and sys.path as it starts, and the environment the server started
+    with."""
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(_PRELOAD)
+    return ctx
+
+
 def _run_local(make_worker, tasks, workers: int, what: str) -> Iterator[tuple[int, Any]]:
-    ctx = mp.get_context("spawn")
+    ctx = worker_context()
     task_queue, results = ctx.Queue(), ctx.Queue()
     for item in enumerate(tasks):
         task_queue.put(item)

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import multiprocessing as mp
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -31,6 +30,7 @@ from depthq.data.labels import MIN_FRAMES
 from depthq.data.recorder import CollectConfig, collect_run, exploration_env
 from depthq.evaluate.metrics import summarize
 from depthq.evaluate.online import drive, parse_canyon_set
+from depthq.parallel import worker_context
 from depthq.sim.canyon import (
     HARD_CANYON,
     CanyonConfig,
@@ -127,7 +127,7 @@ def calibrate(
     print(f"heuristic in {canyons} (camera off); OU: {ou_runs} runs in hard/train:0-{ou_runs - 1}\n")
     print("\n".join(lines))
     n = len(candidates)
-    with ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(2, mp_context=worker_context()) as pool:
         rows = list(pool.map(measure, candidates.values(), [canyons] * n, [ou_runs] * n))
     for (name, canyon), (h, ou) in zip(candidates.items(), rows, strict=True):
         mark = " (chosen)" if canyon == chosen else ""

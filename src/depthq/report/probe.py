@@ -16,7 +16,6 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
 
 from __future__ import annotations
 
-import multiprocessing as mp
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -32,6 +31,7 @@ from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_agreement
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
+from depthq.parallel import worker_context
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
 from depthq.train.trainer import train
@@ -88,7 +88,7 @@ def small_dqn(
 
 
 def _parallel(fn, args_list: list[tuple]) -> list:
-    with ProcessPoolExecutor(max_workers=2, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(max_workers=2, mp_context=worker_context()) as pool:
         futures = [pool.submit(fn, *args) for args in args_list]
         return [f.result() for f in tqdm(futures, desc=fn.__name__, unit="task")]
 
