@@ -45,6 +45,51 @@ def small_hard_dataset(tmp_path_factory):
     return root
 
 
+@pytest.fixture(scope="session")
+def toy_nets(small_dataset, tmp_path_factory):
+    """A Depth-Q-Net and a Coll-Q-Net trained for two batches of one epoch on `small_dataset`, once per
+    session: {"depth": folder, "coll": folder}, for what needs some trained network (export, lock-step
+    driving, benches). Read-only: a test that trains on goes on in a copy."""
+    from depthq.train.config import TrainConfig
+    from depthq.train.trainer import train
+
+    root = tmp_path_factory.mktemp("toy_nets")
+    fast = {"epochs": 1, "train_batches": 2, "val_batches": 1, "batch_size": 16}
+    return {kind: train(TrainConfig(model=kind, data=str(small_dataset), **fast), root / kind, progress=False)
+            for kind in ("depth", "coll")}
+
+
+@pytest.fixture(scope="session")
+def reference_collection(tmp_path_factory):
+    """4 training runs and 1 validation run of ≤ 40 steps, seed 3, collected in this process (one
+    worker): the collection tests/test_collect.py tests, which its other collections (2 workers, the
+    CLI, resumed after kill -9) must repeat, as tests/test_parallel.py's on Ray must. Read-only."""
+    from depthq.data.recorder import CollectConfig, collect
+
+    root = tmp_path_factory.mktemp("reference") / "ds"
+    return collect(root, CollectConfig(runs=4, val_runs=1, max_steps=40), seed=3, workers=1, progress=False)
+
+
+OU_CANYONS = ("val:1000", "val:1001", "val:1002")
+
+
+@pytest.fixture(scope="session")
+def ou_evaluation_one_worker(tmp_path_factory):
+    """OU exploration evaluated in 3 val canyons for 6 s each by one local worker, no video: what 2
+    workers (tests/test_evaluate.py) and Ray actors (tests/test_parallel.py) must repeat. Returns
+    (its EvalConfig, its summary). Read-only."""
+    from depthq.evaluate.online import EvalConfig, evaluate
+
+    config = EvalConfig(canyons=OU_CANYONS, time_limit_s=6.0)
+    out = tmp_path_factory.mktemp("ou_one_worker") / "eval"
+    return config, evaluate("ou", out, config, workers=1, progress=False, video=False)
+
+
+def without_timing(runs: list[dict]) -> list[dict]:
+    """Evaluated runs less what depends on the machine's speed."""
+    return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
+
+
 def assert_video(path, n_frames: int, fps: float) -> None:
     """A playable H.264 MP4 of the first canyon: one 1280×400 frame per decision, not blank, moving."""
     import imageio_ffmpeg

@@ -2,7 +2,8 @@
 each with its own temp folder and 2 CPUs): the smoke preset's trainings and evaluations, each a Ray
 task, run on both nodes, as Ray's task records show, and killing the second node mid-run still gives
 the tables of the local executor, to the byte (this is also the suite's test that Ray and local
-processes give the same tables: a second, one-node run would cost 80 s of the 10-minute budget)."""
+processes give the same tables: a second, one-node run would cost 80 s of the 10-minute budget). The
+reference policies' evaluations are the local run's (their Ray actors: tests/test_parallel.py)."""
 
 from __future__ import annotations
 
@@ -79,6 +80,10 @@ def test_a_two_node_cluster_runs_the_smoke_preset_and_survives_losing_a_node(smo
     copy.mkdir()
     shutil.copytree(smoke / "data", copy / "data")
     shutil.copyfile(smoke / "reproduce.json", copy / "reproduce.json")
+    # The reference policies' evaluations too: they run before any model job, one after the other, in
+    # Ray actors that tests/test_parallel.py checks against local processes; here only the models'.
+    for ref in ("heuristic", "ou"):
+        shutil.copytree(smoke / "eval" / ref, copy / "eval" / ref)
     seen: dict[str, set[str]] = {}  # node id → names of the jobs it finished, from Ray's task records
     killed: list[str] = []  # the node id of the worker, once stopped
     finished = threading.Event()

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from depthq.cli import main
+from depthq.configio import to_dict
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect
 from depthq.errors import ConfigError
@@ -22,11 +23,13 @@ ARGS = ["--runs", "4", "--val-runs", "1", "--max-steps", "40", "--seed", "3"]
 CONFIG = CollectConfig(runs=4, val_runs=1, max_steps=40)
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory) -> Dataset:
-    """An uninterrupted single-process collection. Its own, not conftest's small dataset: it is the
-    collection under test, with the config and seed of `ARGS` that the CLI collections repeat."""
-    return collect(tmp_path_factory.mktemp("ref") / "ds", CONFIG, seed=3, workers=1, progress=False)
+@pytest.fixture
+def reference(reference_collection: Dataset) -> Dataset:
+    """An uninterrupted single-process collection (conftest's, shared with the Ray test). Not the small
+    dataset: it is the collection under test, with the config and seed of `ARGS` that the CLI
+    collections repeat."""
+    assert reference_collection.config == to_dict(CONFIG) and reference_collection.seed == 3
+    return reference_collection
 
 
 def arrays(dataset: Dataset) -> dict[str, dict[str, np.ndarray]]:

@@ -23,23 +23,14 @@ from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.trunk import preprocess
 from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.qnet import QNetPolicy
-from depthq.train.config import TrainConfig
-from depthq.train.trainer import train
 
-FAST = {"epochs": 1, "train_batches": 4, "val_batches": 1, "batch_size": 16}
-pytestmark = pytest.mark.slow  # every test here needs two trained networks (the module fixture)
+pytestmark = pytest.mark.slow  # every test here needs two trained networks (conftest's toy_nets)
 
 
-@pytest.fixture(scope="module")
-def trained(tmp_path_factory: pytest.TempPathFactory, small_dataset: Path) -> dict[str, Path]:
-    """conftest's small dataset and a Depth-Q-Net and a Coll-Q-Net trained on it for one short epoch."""
-    root = tmp_path_factory.mktemp("deploy")
-    data = small_dataset
-    folders = {"data": data}
-    for model in ("depth", "coll"):
-        config = TrainConfig(model=model, data=str(data), **FAST)
-        folders[model] = train(config, root / model, progress=False)
-    return folders
+@pytest.fixture
+def trained(small_dataset: Path, toy_nets: dict[str, Path]) -> dict[str, Path]:
+    """conftest's small dataset and its Depth-Q-Net and Coll-Q-Net trained on it for two batches."""
+    return {"data": small_dataset, **toy_nets}
 
 
 def _val_frames(data: Path) -> list[np.ndarray]:

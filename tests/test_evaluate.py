@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import assert_video
+from conftest import assert_video, without_timing
 
 from depthq.cli import main
 from depthq.control import action_selection
@@ -84,20 +84,14 @@ def test_heuristic_evaluation_gives_sane_metrics_and_files(heuristic_eval):
     assert_video(out / "video.mp4", steps, DEFAULT_DECISION_HZ)
 
 
-
-def without_timing(runs: list[dict]) -> list[dict]:
-    return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
-
-
 @pytest.mark.slow
-def test_results_do_not_depend_on_the_number_of_workers(heuristic_eval, tmp_path):
+def test_results_do_not_depend_on_the_number_of_workers(heuristic_eval, ou_evaluation_one_worker, tmp_path):
     config = EvalConfig(canyons=("eval:0", "eval:1"), time_limit_s=6.0)
     two = evaluate("heuristic", tmp_path, config, workers=2, progress=False)
     assert without_timing(two["runs"]) == without_timing(heuristic_eval[1]["runs"])
-    config = EvalConfig(canyons=("eval:3", "eval:4"), time_limit_s=8.0)
-    ou_one = evaluate("ou", tmp_path / "a", config, workers=1, progress=False)
-    ou_two = evaluate("ou", tmp_path / "b", config, workers=2, progress=False)
-    assert without_timing(ou_one["runs"]) == without_timing(ou_two["runs"])
+    config, ou_one = ou_evaluation_one_worker  # conftest's: 3 canyons, one worker
+    ou_two = evaluate("ou", tmp_path / "b", config, workers=2, progress=False, video=False)
+    assert without_timing(ou_two["runs"]) == without_timing(ou_one["runs"])
 
 
 def test_cli_refuses_a_missing_checkpoint_and_an_unknown_canyon_set(tmp_path, capsys):

@@ -26,8 +26,6 @@ from depthq.nets.heads import HeadConfig, QNet, build_head
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.sim.env import CanyonEnv
-from depthq.train.config import TrainConfig
-from depthq.train.trainer import train
 
 CANYONS = ("val:1000", "val:1001", "val:1002")
 LAST_BITS = 2.5e-6  # + 1e-6 relative: what a batch's sums may change (docs/design.md#lockstep)
@@ -129,15 +127,10 @@ def test_reference_policies_drive_in_lockstep_as_alone(name: str) -> None:
     assert len(together[0]["video"]) == together[0]["steps"] and not together[1]["video"]
 
 
-@pytest.fixture(scope="module")
-def checkpoints(tmp_path_factory: pytest.TempPathFactory, small_dataset: Path) -> dict[str, Path]:
-    """A Depth-Q-Net and a Coll-Q-Net trained for two batches on conftest's small dataset."""
-    root = tmp_path_factory.mktemp("lockstep")
-    fast = {"epochs": 1, "train_batches": 2, "val_batches": 1, "batch_size": 16}
-    return {
-        kind: train(TrainConfig(model=kind, data=str(small_dataset), **fast), root / kind, progress=False)
-        for kind in ("depth", "coll")
-    }
+@pytest.fixture
+def checkpoints(toy_nets: dict[str, Path]) -> dict[str, Path]:
+    """A Depth-Q-Net and a Coll-Q-Net trained for two batches on conftest's small dataset (conftest's)."""
+    return toy_nets
 
 
 @pytest.mark.slow

@@ -6,8 +6,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import without_timing
 
 from depthq.cli import main
+from depthq.configio import to_dict
+from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
@@ -23,24 +26,25 @@ def on_ray():
     ray.shutdown()
 
 
-def _without_timing(runs: list[dict]) -> list[dict]:
-    return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]
-
-
 @pytest.mark.slow
 @pytest.mark.ray
-def test_ray_gives_the_local_results(tmp_path: Path, on_ray: Executor) -> None:
-    config = EvalConfig(canyons=("val:1000", "val:1001", "val:1002"), time_limit_s=5.0)
-    local = evaluate("ou", tmp_path / "local", config, workers=2, progress=False, video=False)
+def test_ray_gives_the_local_results(
+    tmp_path: Path, on_ray: Executor, ou_evaluation_one_worker: tuple[EvalConfig, dict],
+    reference_collection: Dataset,
+) -> None:
+    """The local results are conftest's, each made by one local worker: OU evaluated in 3 canyons, and
+    a collection of 5 runs. Two Ray actors repeat them."""
+    config, local = ou_evaluation_one_worker
     remote = evaluate("ou", tmp_path / "ray", config, workers=2, progress=False, video=False, executor=on_ray)
-    assert _without_timing(remote["runs"]) == _without_timing(local["runs"])
+    assert without_timing(remote["runs"]) == without_timing(local["runs"])
     assert [r["canyon"] for r in remote["runs"]] == list(config.canyons)
 
-    data = CollectConfig(runs=3, val_runs=1, max_steps=30)
-    collect(tmp_path / "d_local", data, seed=1, workers=2, progress=False)
-    collect(tmp_path / "d_ray", data, seed=1, workers=2, progress=False, executor=on_ray)
+    data = CollectConfig(runs=4, val_runs=1, max_steps=40)
+    assert reference_collection.config == to_dict(data)
+    collect(tmp_path / "d_ray", data, seed=reference_collection.seed, workers=2, progress=False,
+            executor=on_ray)
     manifest = "manifest.json"
-    assert (tmp_path / "d_ray" / manifest).read_bytes() == (tmp_path / "d_local" / manifest).read_bytes()
+    assert (tmp_path / "d_ray" / manifest).read_bytes() == (reference_collection.root / manifest).read_bytes()
 
 
 class Failing:
