@@ -38,6 +38,7 @@ def bench_features(
             start = time.perf_counter()
             batches = itertools.islice(frame_batches(dataset, size), -(-n // DECODE_BATCH))
             for batch in prefetch(batches, depth=2):
+                batch = batch[: n - frames]  # the first `n` frames, not the rest of their batch
                 net(batch.to(where)).cpu()  # to the cache's memory, as `compute_features` does
                 frames += len(batch)
             seconds = time.perf_counter() - start
