@@ -207,7 +207,7 @@ def _next(results, procs, what: str) -> Any:
     """The next item a worker put on `results`; an error instead of a hang when a worker died."""
     while True:
         try:
-            return results.get(timeout=5)
+            return results.get(timeout=1)  # then, every second, whether a worker died
         except queue.Empty:
             for p in procs:
                 if p.exitcode is not None and p.exitcode != 0:
