@@ -18,7 +18,6 @@ import pytest
 from depthq import experiments
 from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
-from depthq.data.recorder import CollectConfig, collect, exploration_env
 from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.experiments import (
@@ -59,12 +58,10 @@ def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_pytho
 
 
 @pytest.fixture(scope="module")
-def hard_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A toy dataset of the hard family: 4 kept training runs and 3 validation runs of ≤ 40 steps."""
-    root = tmp_path_factory.mktemp("hard") / "data"
-    config = CollectConfig(runs=4, val_runs=3, max_steps=40, env=exploration_env(family="hard"))
-    collect(root, config, seed=0, workers=1, progress=False)
-    return root
+def hard_data(small_hard_dataset: Path) -> Path:
+    """A toy dataset of the hard family (conftest's: 3 training runs and 1 validation run of ≤ 40
+    steps); the experiments read it and add to its feature cache."""
+    return small_hard_dataset
 
 
 @pytest.fixture(scope="module")
