@@ -171,3 +171,12 @@ def format_label_error(report: dict[str, Any]) -> list[str]:
         lines.append(f"{split:>6} per bin, left to right (mean): "
                      + " ".join(f"{e:.2f}" for e in row["per_bin"]))
     return lines
+
+
+def stats_report(dataset: Dataset, config: DataConfig) -> tuple[dict[str, Any], str]:
+    """What `depthq dataset stats` prints: the record of `--json` (the subsets' statistics, and the
+    camera labels' error where runs hold them) and the text."""
+    stats, labels = dataset_stats(dataset, config), label_error(dataset)
+    record = {**stats, **({"camera_labels": labels} if labels else {})}
+    text = "\n".join([format_stats(stats), *(["", *format_label_error(labels)] if labels else [])])
+    return record, text

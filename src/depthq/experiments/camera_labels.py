@@ -49,7 +49,7 @@ import numpy as np
 from depthq.configio import atomic_write_bytes, from_dict, read_json, to_dict, write_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
-from depthq.data.stats import ERROR_BANDS, dataset_stats, format_label_error, format_stats, label_error
+from depthq.data.stats import ERROR_BANDS, stats_report
 from depthq.errors import ConfigError, explain
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments.cells import mean_interval
@@ -158,10 +158,7 @@ def write_stats(data: Path, folder: Path) -> dict[str, Any]:
     path = folder / "stats.json"
     if path.is_file():
         return read_json(path)
-    dataset = Dataset.open(data)
-    stats, labels = dataset_stats(dataset, DataConfig()), label_error(dataset)
-    record = {**stats, **({"camera_labels": labels} if labels else {})}
-    text = "\n".join([format_stats(stats), *(["", *format_label_error(labels)] if labels else [])])
+    record, text = stats_report(Dataset.open(data), DataConfig())
     atomic_write_bytes(folder / "stats.txt", (text + "\n").encode())
     write_json(path, record)
     return record

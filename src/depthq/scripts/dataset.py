@@ -9,7 +9,7 @@ from pathlib import Path
 
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
-from depthq.data.stats import dataset_stats, format_label_error, format_stats, label_error
+from depthq.data.stats import stats_report
 from depthq.flags import add_config_arguments, config_from_args
 
 # How runs are stored does not change what they count as: no flag for it here.
@@ -30,12 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     dataset = Dataset.open(args.dir)
     if args.action == "stats":
-        stats = dataset_stats(dataset, config_from_args(DataConfig, args))
-        labels = label_error(dataset)
-        if args.json:
-            print(json.dumps({**stats, **({"camera_labels": labels} if labels else {})}, indent=2))
-        else:
-            print("\n".join([format_stats(stats), *(["", *format_label_error(labels)] if labels else [])]))
+        record, text = stats_report(dataset, config_from_args(DataConfig, args))
+        print(json.dumps(record, indent=2) if args.json else text)
         return 0
     problems = dataset.verify(progress=True)
     for problem in problems:

@@ -27,7 +27,7 @@ from depthq.configio import from_dict, to_dict
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import DataError
 from depthq.sim.mjcf import CameraConfig, RobotConfig
-from depthq.sim.sensors import BinConfig
+from depthq.sim.sensors import N_RAYS, BinConfig, depth_bins
 
 BATCH = 32  # frames per forward pass
 DILATIONS = (1, 2, 4, 8)
@@ -79,10 +79,11 @@ class Geometry:
         return np.minimum(forward / np.cos(bearings), self.bins.clip).astype(np.float32)
 
     def bins_of(self, foot_rows: np.ndarray) -> np.ndarray:
-        """Foot rows (N, columns) → depth bins (N, n_bins): readings averaged in groups, as the LiDAR's."""
-        readings = self.ranges(foot_rows)
-        n = self.bins.n_readings // self.bins.group
-        return readings[:, : n * self.bins.group].reshape(len(readings), n, self.bins.group).mean(axis=2)
+        """Foot rows (N, columns) → depth bins (N, n_bins): the readings placed in a scan at their
+        bearings, then binned as the LiDAR's (`depthq.sim.sensors.depth_bins`)."""
+        scan = np.full((len(foot_rows), N_RAYS), np.inf, np.float32)
+        scan[:, (self.bins.first_bearing - np.arange(self.bins.n_readings)) % N_RAYS] = self.ranges(foot_rows)
+        return depth_bins(scan, self.bins)
 
 
 def geometry(env: dict[str, Any] | None, scale: int) -> Geometry:
@@ -172,12 +173,17 @@ def foot_rows(floor: np.ndarray, geo: Geometry, nearest: float) -> np.ndarray:
     return (start + 1 - first).astype(np.float32)  # the foot: the lower edge of the first blocked row
 
 
-
-
 def geometry_record(geo: Geometry) -> dict[str, Any]:
     """What a labeller folder records of the camera and robot it learnt with (the pixel noise aside)."""
     camera = {k: v for k, v in to_dict(geo.camera).items() if k != "noise_std"}
     return {"camera": camera, "robot": to_dict(geo.robot)}
+
+
+def identity(config: Any, geometry: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:
+    """What fixes a floor labeller's output besides its weights (a LabellerConfig, `geometry_record`, the
+    bins' config); `context` named only when on, as records before it had none."""
+    return {"method": "floor", "scale": config.scale, "nearest": config.nearest, "width": config.width,
+            "geometry": geometry, "bins": bins, **({"context": True} if config.context else {})}
 
 
 def env_of(record: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:

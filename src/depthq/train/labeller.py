@@ -190,16 +190,15 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
             raise ConfigError(f"{dataset.root} has no {split} runs to train a labeller on")
     torch.set_num_threads(cores())
     torch.manual_seed(config.seed)
+    bins = bin_geometry(dataset)
     if config.method == "floor":
         geo = floor.geometry(dataset.config.get("env"), config.scale)
         net, losses, val = floor.train(dataset, geo, config, progress, device)
-        identity = {"method": "floor", "scale": config.scale, "nearest": config.nearest,
-                    "width": config.width, "geometry": floor.geometry_record(geo),
-                    "bins": bin_geometry(dataset), **({"context": True} if config.context else {})}
+        identity = floor.identity(config, floor.geometry_record(geo), bins)
         results = {"val_loss": round(val, 6)}
     else:
         net, losses, val = _train_perception(dataset, config, progress, device)
-        identity = _identity(config.trunk, config.input_size, bin_geometry(dataset))
+        identity = _identity(config.trunk, config.input_size, bins)
         results = {"val_l1": round(val, 6)}
     tensors = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     out.mkdir(parents=True, exist_ok=True)
@@ -207,8 +206,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
     blocks = np.array_split(np.asarray(losses), min(LOG_BLOCKS, len(losses)))
     write_json(out / CONFIG, {
         "format": FORMAT, "format_version": FORMAT_VERSION, "provenance": provenance(),
-        "config": to_dict(config), "name": config.method, **identity, "bins": bin_geometry(dataset),
-        "n_bins": BinConfig(**bin_geometry(dataset)).n_bins,
+        "config": to_dict(config), "name": config.method, **identity, "n_bins": BinConfig(**bins).n_bins,
         "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
         "source": {"path": str(dataset.root.resolve()), "fingerprint": dataset.fingerprint(),
                    "family": dataset.family()},
@@ -268,8 +266,7 @@ def load_labeller(folder: Path) -> Labeller:
     tensors, metadata = read_weights(folder / WEIGHTS)
     if config.method == "floor":
         net: nn.Module = floor.FloorNet(config.width, config.context)
-        keys = ("method", "scale", "nearest", "width", "geometry", "bins", "context")
-        identity = {key: record[key] for key in keys if key in record}
+        identity = floor.identity(config, record["geometry"], record["bins"])
     else:
         net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
         identity = _identity(config.trunk, config.input_size, record["bins"])
