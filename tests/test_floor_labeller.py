@@ -55,9 +55,28 @@ def test_foot_rows_give_the_ranges_and_bins_of_a_straight_wall() -> None:
     readings = geo.ranges(np.full((1, cols), v[0]))[0]
     expected = np.minimum(1.0 / np.cos(np.deg2rad(51 - np.arange(104))), 2.0)
     assert np.allclose(readings, expected, atol=1e-5)
-    bins = geo.bins_of(np.full((1, cols), v[0]))[0]
+    bins = geo.bins_of(readings[None])[0]
     assert bins.shape == (26,) and np.allclose(bins, expected.reshape(26, 4).mean(axis=1), atol=1e-5)
     assert np.all(geo.ranges(np.full((1, cols), rows / 2)) == 2.0)  # a foot on the horizon: far
+
+
+def test_the_memory_keeps_an_obstacle_that_earlier_frames_saw() -> None:
+    geo = _geometry()
+    ahead = 51  # the reading straight ahead (bearing 0)
+    readings = np.full((4, 104), 2.0, np.float32)
+    readings[0, ahead] = 1.0  # frame 0 sees a wall 1 m ahead; the later frames lose it
+    # Straight ahead along x, 0.25 m per frame, 0.5 s apart: the wall comes 0.25 m nearer each frame.
+    poses = np.array([[0.25 * t, 0.0, 0.0] for t in range(4)])
+    times = np.array([0.0, 0.5, 1.0, 1.5])
+    fused = floor.remember(readings, poses, times, geo, memory_s=1.0)
+    assert np.allclose(fused[:3, ahead], [1.0, 0.75, 0.5], atol=1e-6)
+    assert fused[3, ahead] == 2.0  # frame 0 is 1.5 s back: beyond the memory
+    others = np.delete(np.arange(104), ahead)
+    assert np.all(fused[:, others] == 2.0)  # nothing else seen, nothing made up
+    assert np.array_equal(floor.remember(readings, poses, times, geo, memory_s=0.0), readings)
+    # Turned 10° to the left on the spot (the sensor sits behind the axle, so it moves a little too).
+    turned = floor.remember(readings[:2], np.array([[0, 0, 0], [0, 0, np.deg2rad(10)]]), times[:2], geo, 1.0)
+    assert turned[1].argmin() == ahead + 10 and abs(turned[1].min() - 1.0) < 0.01
 
 
 def test_foot_rows_find_the_first_blocked_pair_from_the_bottom() -> None:
@@ -102,11 +121,12 @@ def test_the_floor_labeller_learns_from_real_frames_and_labels_its_own_family(
     for entry in dataset.entries():
         with dataset.reader(entry) as reader:
             held = reader.camera_labels()
-            frames = reader.run(images=True).images
+            run = reader.run(images=True)
+            frames = run.images
         assert held is not None and held.labeller == "floor" and held.fingerprint == labeller.fingerprint
         assert held.bins.shape == (len(frames), 26)
         assert np.all((held.bins >= 0) & (held.bins <= 2.0))
-        assert np.array_equal(held.bins, labeller.estimate(frames))  # read back, bit for bit
+        assert np.array_equal(held.bins, labeller.estimate(run))  # read back, bit for bit
     assert label_dataset(dataset, labeller, progress=False) == (0, len(dataset.entries()))  # resumed: none
     assert main(["dataset", "stats", str(root)]) == 0
     assert "camera labels (floor" in capsys.readouterr().out

@@ -5,8 +5,11 @@ convolutional net learns which pixels are free floor from the robot's own future
 rectangle at the next poses, from odometry, projected into the current frame: floor it drove over)
 against pixels above the horizon (never floor). Per image column, the first non-floor pixel up from
 the bottom is the obstacle's foot; its row, the camera's height and the column's bearing give the
-range, resampled to the LiDAR's readings and bins (docs/design.md#camera-labels). No depth of any kind
-goes in: it may label the very dataset it learnt from.
+range, resampled to the LiDAR's readings and bins (docs/design.md#camera-labels). Each frame's readings
+then take the nearest of the readings of the frames of the last `memory_s` seconds, moved into it by
+odometry (the canyons stand still): an obstacle the net loses as the robot closes in, once it fills the
+bottom rows, stays where earlier frames saw it. No depth of any kind goes in: it may label the very
+dataset it learnt from.
 
 Its folder is a labeller folder (`depthq.train.labeller`), `name` "floor".
 """
@@ -25,6 +28,7 @@ from tqdm import tqdm
 
 from depthq.configio import from_dict, to_dict
 from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.run import Run
 from depthq.errors import DataError
 from depthq.sim.mjcf import CameraConfig, RobotConfig
 from depthq.sim.sensors import N_RAYS, BinConfig, depth_bins
@@ -78,12 +82,37 @@ class Geometry:
             forward = np.where(below > 0, self.focal * self.camera.mount_height / below, np.inf)
         return np.minimum(forward / np.cos(bearings), self.bins.clip).astype(np.float32)
 
-    def bins_of(self, foot_rows: np.ndarray) -> np.ndarray:
-        """Foot rows (N, columns) → depth bins (N, n_bins): the readings placed in a scan at their
-        bearings, then binned as the LiDAR's (`depthq.sim.sensors.depth_bins`)."""
-        scan = np.full((len(foot_rows), N_RAYS), np.inf, np.float32)
-        scan[:, (self.bins.first_bearing - np.arange(self.bins.n_readings)) % N_RAYS] = self.ranges(foot_rows)
+    def bins_of(self, readings: np.ndarray) -> np.ndarray:
+        """Readings (N, n_readings) → depth bins (N, n_bins): placed in a scan at their bearings, then
+        binned as the LiDAR's (`depthq.sim.sensors.depth_bins`)."""
+        scan = np.full((len(readings), N_RAYS), np.inf, np.float32)
+        scan[:, (self.bins.first_bearing - np.arange(self.bins.n_readings)) % N_RAYS] = readings
         return depth_bins(scan, self.bins)
+
+
+def remember(readings: np.ndarray, poses: np.ndarray, times: np.ndarray, geo: Geometry, memory_s: float
+             ) -> np.ndarray:
+    """Readings (N, n_readings) of a run's frames at `poses` (N, 3) and `times` (N,) s → each frame's
+    readings fused with those of the frames up to `memory_s` s before it: every earlier obstacle point
+    (a reading under the clip) moved into the frame's sensor frame by odometry, the nearest per reading."""
+    fused = readings.copy()
+    bearings = np.deg2rad(geo.bins.first_bearing - np.arange(geo.bins.n_readings))
+    poses = poses.astype(np.float64)
+    heading = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)
+    sensor = poses[:, :2] + geo.robot.sensor_offset_x * heading
+    for t in range(1, len(readings)):
+        for k in range(t - 1, -1, -1):
+            if times[t] - times[k] > memory_s + 1e-6:
+                break
+            seen = readings[k] < geo.bins.clip
+            angle = poses[k, 2] + bearings[seen]
+            dx = sensor[k, 0] + readings[k, seen] * np.cos(angle) - sensor[t, 0]
+            dy = sensor[k, 1] + readings[k, seen] * np.sin(angle) - sensor[t, 1]
+            bearing = (np.rad2deg(np.arctan2(dy, dx) - poses[t, 2]) + 180) % 360 - 180
+            index = np.round(geo.bins.first_bearing - bearing).astype(int)
+            inside = (index >= 0) & (index < geo.bins.n_readings)
+            np.minimum.at(fused[t], index[inside], np.hypot(dx, dy)[inside].astype(np.float32))
+    return fused
 
 
 def geometry(env: dict[str, Any] | None, scale: int) -> Geometry:
@@ -181,9 +210,10 @@ def geometry_record(geo: Geometry) -> dict[str, Any]:
 
 def identity(config: Any, geometry: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:
     """What fixes a floor labeller's output besides its weights (a LabellerConfig, `geometry_record`, the
-    bins' config); `context` named only when on, as records before it had none."""
+    bins' config); `context` and `memory_s` named only when on, as records before them had none."""
     return {"method": "floor", "scale": config.scale, "nearest": config.nearest, "width": config.width,
-            "geometry": geometry, "bins": bins, **({"context": True} if config.context else {})}
+            "geometry": geometry, "bins": bins, **({"context": True} if config.context else {}),
+            **({"memory_s": config.memory_s} if config.memory_s else {})}
 
 
 def env_of(record: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:
@@ -192,22 +222,29 @@ def env_of(record: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:
 
 
 class FloorEstimate:
-    """uint8 frames (N, H, W, 3) → bins (N, n_bins) float32: floor net, foot rows, ranges, bins."""
+    """A run → bins (N, n_bins) float32: floor net, foot rows, readings, the memory, bins."""
 
-    def __init__(self, net: FloorNet, geo: Geometry, nearest: float) -> None:
-        self.net, self.geo, self.nearest = net, geo, nearest
+    def __init__(self, net: FloorNet, geo: Geometry, nearest: float, memory_s: float = 0.0) -> None:
+        self.net, self.geo, self.nearest, self.memory_s = net, geo, nearest, memory_s
         # The net sees the rows from a receptive field above the horizon down: those above are no floor.
         self.top = max(0, int(geo.shape[0] / 2) - RECEPTIVE_RADIUS - 1)
 
+    def __call__(self, run: Run) -> np.ndarray:
+        readings = self.readings(run.images)
+        if self.memory_s:
+            readings = remember(readings, run.poses, run.times, self.geo, self.memory_s)
+        return self.geo.bins_of(readings).astype(np.float32)
+
     @torch.inference_mode()
-    def __call__(self, frames: np.ndarray) -> np.ndarray:
+    def readings(self, frames: np.ndarray) -> np.ndarray:
+        """uint8 frames (N, H, W, 3) → each frame's own readings (N, n_readings), m."""
         out = []
         for i in range(0, len(frames), BATCH):
             x = torch.from_numpy(reduce(frames[i : i + BATCH], self.geo.scale))
             p = np.zeros((len(x), *self.geo.shape), np.float32)
             p[:, self.top :] = torch.sigmoid(self.net(x[:, :, self.top :], context_of(x))).numpy()
-            out.append(self.geo.bins_of(foot_rows(p, self.geo, self.nearest)))
-        return np.concatenate(out).astype(np.float32)
+            out.append(self.geo.ranges(foot_rows(p, self.geo, self.nearest)))
+        return np.concatenate(out)
 
 
 def _pool(dataset: Dataset, entries: list[RunEntry], geo: Geometry, config: Any, rng: np.random.Generator,

@@ -36,6 +36,7 @@ from tqdm import tqdm
 from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.run import Run
 from depthq.data.runfile import RunReader
 from depthq.data.views import run_then_frame
 from depthq.errors import ConfigError, DataError
@@ -89,6 +90,9 @@ class LabellerConfig:
     lookahead: int = 12
     # floor: floor nearer than this (m ahead of the camera) is neither learnt nor judged.
     nearest: float = 0.3
+    # floor: each frame's readings fused with those of the frames of the last memory_s seconds, moved
+    # by odometry (nearest wins): obstacles lost close up stay where earlier frames saw them; 0: off.
+    memory_s: float = 2.0
     # floor: random frames of each training run in the training pool (held in memory, reduced).
     pool_frames: int = 6
     # floor: the first training runs whose frames make the pool.
@@ -123,6 +127,9 @@ class LabellerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < np.inf:
                 raise ConfigError(f"labeller.{name} must be a finite number > 0, got {value!r}")
+        m = self.memory_s
+        if isinstance(m, bool) or not isinstance(m, int | float) or not 0 <= m < np.inf:
+            raise ConfigError(f"labeller.memory_s must be a finite number of seconds >= 0, got {m!r}")
 
 
 class Perception(nn.Module):
@@ -141,13 +148,14 @@ class Perception(nn.Module):
 
 
 class PerceptionEstimate:
-    """uint8 frames (N, H, W, 3) → bins (N, n_bins), clipped to [0, DEPTH_CLIP] m: trunk, then read-out."""
+    """A run → bins (N, n_bins), clipped to [0, DEPTH_CLIP] m: each frame through the trunk, then read-out."""
 
     def __init__(self, net: Perception, trunk: Trunk, input_size: int) -> None:
         self.net, self.trunk, self.input_size = net, trunk, input_size
 
     @torch.inference_mode()
-    def __call__(self, frames: np.ndarray) -> np.ndarray:
+    def __call__(self, run: Run) -> np.ndarray:
+        frames = run.images
         bins = [self.net(self.trunk(preprocess(frames[i : i + BATCH], self.input_size)))
                 for i in range(0, len(frames), BATCH)]
         return torch.cat(bins).clamp(0.0, DEPTH_CLIP).numpy().astype(np.float32)
@@ -157,13 +165,13 @@ class PerceptionEstimate:
 class Labeller:
     """A trained labeller ready to label frames (`load_labeller`)."""
 
-    estimate: Callable[[np.ndarray], np.ndarray]  # uint8 frames (N, H, W, 3) → bins (N, n_bins) float32
+    estimate: Callable[[Run], np.ndarray]  # a run read with its images → bins (N, n_bins) float32
     fingerprint: str
     record: dict[str, Any]  # its config.json
 
     def label(self, reader: RunReader) -> CameraLabels:
         """A run's camera labels: every stored frame's estimated bins."""
-        return CameraLabels(self.estimate(reader.run(images=True).images), self.record["name"],
+        return CameraLabels(self.estimate(reader.run(images=True)), self.record["name"],
                             self.fingerprint)
 
 
@@ -277,7 +285,7 @@ def load_labeller(folder: Path) -> Labeller:
     net.eval()
     if config.method == "floor":
         geo = floor.geometry(floor.env_of(record["geometry"], record["bins"]), config.scale)
-        estimate: Callable[[np.ndarray], np.ndarray] = floor.FloorEstimate(net, geo, config.nearest)
+        estimate: Callable[[Run], np.ndarray] = floor.FloorEstimate(net, geo, config.nearest, config.memory_s)
     else:
         estimate = PerceptionEstimate(net, build_trunk(config.trunk), config.input_size)
     return Labeller(estimate, _fingerprint(identity, metadata[DIGEST]), record)
