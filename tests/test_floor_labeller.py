@@ -13,7 +13,7 @@ import pytest
 
 from depthq.cli import main
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, DataError
 from depthq.sim.mjcf import CameraConfig, RobotConfig
 from depthq.sim.sensors import BinConfig
 from depthq.train import floor
@@ -58,6 +58,19 @@ def test_foot_rows_give_the_ranges_and_bins_of_a_straight_wall() -> None:
     bins = geo.bins_of(readings[None])[0]
     assert bins.shape == (26,) and np.allclose(bins, expected.reshape(26, 4).mean(axis=1), atol=1e-5)
     assert np.all(geo.ranges(np.full((1, cols), rows / 2)) == 2.0)  # a foot on the horizon: far
+
+
+def test_a_recordings_frames_are_resized_to_the_camera_if_their_aspect_ratio_fits() -> None:
+    geo = _geometry(scale=2)
+    simulated = np.random.default_rng(0).integers(0, 256, (1, 308, 410, 3), dtype=np.uint8)
+    boxed = floor.reduce(simulated, geo)  # the camera's own size: 2 × 2 box means
+    assert boxed.shape == (1, 3, 154, 205)
+    assert np.isclose(boxed[0, 0, 0, 0], simulated[0, :2, :2, 0].mean() / 255)
+    grey = np.full((2, 24, 32, 3), 128, np.uint8)  # a 32 × 24 robot camera: 4:3, as 410 × 308
+    resized = floor.reduce(grey, geo)
+    assert resized.shape == (2, 3, 154, 205) and np.allclose(resized, 128 / 255)
+    with pytest.raises(DataError, match="50 × 30 pixels"):
+        floor.reduce(np.zeros((1, 30, 50, 3), np.uint8), geo)
 
 
 def test_the_memory_keeps_an_obstacle_that_earlier_frames_saw() -> None:

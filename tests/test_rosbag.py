@@ -263,6 +263,28 @@ def test_a_camera_only_recording_imports_with_an_empty_scan_topic(tmp_path: Path
     assert np.allclose(run.actions[:-1], 0.1) and np.allclose(run.poses[:, 0], np.asarray(frames) / 1000)
 
 
+@pytest.mark.slow  # a toy floor labeller, a labelling and a training: ~10 s
+def test_a_camera_only_recording_trains_on_labels_from_its_own_camera(tmp_path: Path) -> None:
+    # Two drives 10 s apart (each 30 frames at 4 Hz): one train run, one val run; no LiDAR anywhere.
+    frames = [250 * i for i in range(30)] + [20_000 + 250 * i for i in range(30)]
+    bag = write_bag(tmp_path / "camera.bag", frames, [(t + 30, 0.5, 0.1) for t in frames], scan_type=None,
+                    ros1=True)
+    data, labeller, net = tmp_path / "data", tmp_path / "floor", tmp_path / "net"
+    assert main(["bag", "import", str(bag), "--out", str(data), "--scan-topic", ""]) == 0
+    assert main(["labeller", "--data", str(data), "--out", str(labeller), "--steps", "3", "--batch-size", "2",
+                 "--pool-frames", "2", "--width", "4", "--no-progress"]) == 0  # camera and odometry only
+    assert main(["label", str(data), "--from", "camera", "--labeller", str(labeller), "--no-progress"]) == 0
+    dataset = Dataset.open(data)
+    for entry in dataset.entries():
+        run = dataset.read_run(entry, images=False)
+        assert np.isnan(run.bins).all() and run.camera is not None  # no LiDAR, labels from the camera
+        assert np.isfinite(run.camera.bins).all() and ((run.camera.bins >= 0) & (run.camera.bins <= 2)).all()
+    assert main(["train", "--model", "depth", "--data", str(data), "--labels", "camera", "--epochs", "1",
+                 "--train-batches", "2", "--val-batches", "1", "--batch-size", "4", "--out", str(net),
+                 "--no-progress"]) == 0
+    assert (net / "last.safetensors").is_file()
+
+
 def _laser(angle_min: float, increment_deg: float, ranges: np.ndarray):
     """A LaserScan as a driver publishes it and a bag gives it back (float32 angles): beam j at
     angle_min + j · increment, range 0.12 to 3.5 m."""

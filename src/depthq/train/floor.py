@@ -39,6 +39,9 @@ RECEPTIVE_RADIUS = sum(DILATIONS)  # pixels each side that a floor logit sees
 CONTEXT_GRID = (2, 4)  # rows × columns of the context's colour grid
 CONTEXT_BAND = 0.3  # the lowest fraction of a frame's rows that the context averages
 CONTEXT = 3 * CONTEXT_GRID[0] * CONTEXT_GRID[1]
+# A recording's frames may differ from the camera's size by this much in aspect ratio (rounding) and
+# still be resized to it.
+ASPECT_TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -149,11 +152,22 @@ def footprint(geo: Geometry, poses: np.ndarray, t: int, frames: int, nearest: fl
     return np.asarray(image, dtype=bool)
 
 
-def reduce(frames: np.ndarray, scale: int) -> np.ndarray:
-    """uint8 frames (N, H, W, 3) → float32 (N, 3, H // scale, W // scale) in [0, 1], box-averaged."""
+def reduce(frames: np.ndarray, geo: Geometry) -> np.ndarray:
+    """uint8 frames (N, H, W, 3) → float32 (N, 3, rows, columns) in [0, 1] at `geo.shape`: box-averaged
+    by the scale from the camera's size; frames of another size (a robot's recording) resized to it,
+    if they have the camera's aspect ratio (else a DataError: their rows would give wrong distances)."""
     n, h, w, _ = frames.shape
-    h2, w2 = h // scale, w // scale
-    x = frames[:, : h2 * scale, : w2 * scale].reshape(n, h2, scale, w2, scale, 3).mean(axis=(2, 4))
+    rows, cols = geo.shape
+    scale = geo.scale
+    if (h, w) != (geo.camera.height, geo.camera.width):
+        if abs(w / h / (geo.camera.width / geo.camera.height) - 1) > ASPECT_TOLERANCE:
+            raise DataError(f"frames of {w} × {h} pixels do not have the labeller's camera's aspect "
+                            f"ratio ({geo.camera.width} × {geo.camera.height}): its rows would give wrong "
+                            "distances")
+        x = torch.from_numpy(np.ascontiguousarray(frames.transpose(0, 3, 1, 2), dtype=np.float32) / 255.0)
+        x = F.interpolate(x, size=(rows, cols), mode="bilinear", antialias=True, align_corners=False)
+        return x.numpy()
+    x = frames[:, : rows * scale, : cols * scale].reshape(n, rows, scale, cols, scale, 3).mean(axis=(2, 4))
     return np.ascontiguousarray(x.transpose(0, 3, 1, 2), dtype=np.float32) / 255.0
 
 
@@ -240,7 +254,7 @@ class FloorEstimate:
         """uint8 frames (N, H, W, 3) → each frame's own readings (N, n_readings), m."""
         out = []
         for i in range(0, len(frames), BATCH):
-            x = torch.from_numpy(reduce(frames[i : i + BATCH], self.geo.scale))
+            x = torch.from_numpy(reduce(frames[i : i + BATCH], self.geo))
             p = np.zeros((len(x), *self.geo.shape), np.float32)
             p[:, self.top :] = torch.sigmoid(self.net(x[:, :, self.top :], context_of(x))).numpy()
             out.append(self.geo.ranges(foot_rows(p, self.geo, self.nearest)))
@@ -258,7 +272,7 @@ def _pool(dataset: Dataset, entries: list[RunEntry], geo: Geometry, config: Any,
         for t in rng.choice(n, size=min(config.pool_frames, n), replace=False) if n > 0 else ():
             mask = footprint(geo, run.poses, int(t), config.lookahead, config.nearest)
             if mask.any():
-                images.append(reduce(run.images[t : t + 1], geo.scale)[0].astype(np.float16))
+                images.append(reduce(run.images[t : t + 1], geo)[0].astype(np.float16))
                 masks.append(mask)
     if not images:
         raise DataError(f"{dataset.root}: no frame sees the robot's future footprint to learn the floor from")
