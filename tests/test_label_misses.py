@@ -1,6 +1,7 @@
-"""The near-obstacle label errors experiment (`depthq.experiments.label_misses`): which obstacle a
-bin's nearest reading hits, by hand; and the experiment on a toy floor labeller's labels of hard-family
-runs, its counts checked against the run files."""
+"""The floor labels' experiments: near-obstacle errors (`depthq.experiments.label_misses`), which
+obstacle a bin's nearest reading hits by hand and the split on a toy floor labeller's labels of
+hard-family runs, its counts checked against the run files; and the memory length
+(`depthq.experiments.label_memory`), its rows against the labels `depthq label` writes."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import pytest
 
 from depthq.cli import main
 from depthq.data.manifest import Dataset
-from depthq.experiments import label_misses
+from depthq.data.stats import label_errors
+from depthq.experiments import label_memory, label_misses
 from depthq.sim.sensors import BinConfig
 from depthq.train.labeller import LabellerConfig, train_labeller
 
@@ -58,3 +60,14 @@ def test_the_experiment_splits_every_near_bin_by_what_it_hits(
     assert "| wall |" in capsys.readouterr().out and out.is_file()
     assert label_misses.main([str(root), "--near", "0.5", "--far", "0.5"]) == 2  # an empty band
     assert "--far and --near" in capsys.readouterr().err
+
+
+    # The memory lengths: the labeller's own (2 s, its default) gives what `depthq label` wrote.
+    memory = label_memory.measure(labeller, dataset, (0.0, 2.0), split="train", progress=False)
+    written = [dataset.read_run(e, images=False) for e in dataset.entries("train")]
+    truth = np.concatenate([r.bins for r in written])
+    labels = np.concatenate([r.camera.bins for r in written])
+    assert memory["memory_s"]["2.0"] == label_errors(truth, labels, len(written))
+    assert memory["memory_s"]["0.0"]["frames"] == memory["memory_s"]["2.0"]["frames"]
+    assert label_memory.main([str(labeller), str(root), "--memory", "0,x"]) == 2
+    assert "--memory must be seconds" in capsys.readouterr().err

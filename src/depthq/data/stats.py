@@ -95,14 +95,15 @@ def label_error(dataset: Dataset) -> dict[str, Any] | None:
                 labellers.add((run.camera.labeller, run.camera.fingerprint))
                 pairs.append((run.bins, run.camera.bins))
         if pairs:
-            out[split] = _errors(np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs]),
-                                 len(pairs))
+            lidar, camera = (np.concatenate([p[i] for p in pairs]) for i in (0, 1))
+            out[split] = label_errors(lidar, camera, len(pairs))
     if not labellers:
         return None
     return {"labellers": [{"name": n, "fingerprint": f} for n, f in sorted(labellers)], "splits": out}
 
 
-def _errors(lidar: np.ndarray, camera: np.ndarray, runs: int) -> dict[str, Any]:
+def label_errors(lidar: np.ndarray, camera: np.ndarray, runs: int) -> dict[str, Any]:
+    """Camera bins against LiDAR bins (frames, bins), of `runs` runs: per band, nearest bin, per bin."""
     valid = np.isfinite(lidar) & np.isfinite(camera)
     error = np.where(valid, np.abs(camera - lidar), np.nan)
     bands = []
