@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from paper_head import paper_head
 
 from depthq.errors import ConfigError
-from depthq.nets.heads import HeadConfig, build_head
+from depthq.nets.heads import build_head
 from depthq.train.bootstrap import bootstrapped_targets, greedy_bins
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
@@ -20,7 +21,7 @@ from depthq.train.trainer import train
 
 def _head_with_bias(per_action: torch.Tensor) -> torch.nn.Module:
     """A per-action head whose bins are its output bias whatever the feature: (3, bins) for −1, 0, +1."""
-    head = build_head(HeadConfig("depth", 4, hidden=2, n_bins=per_action.shape[1], form="per_action")).eval()
+    head = build_head(paper_head("depth", 4, hidden=2, n_bins=per_action.shape[1], form="per_action")).eval()
     with torch.no_grad():
         head.output.weight.zero_()
         head.output.bias.copy_(per_action.flatten())

@@ -190,10 +190,12 @@ def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> N
 def test_no_setting_is_declared_twice() -> None:
     """TrainConfig holds a SampleConfig instead of mirroring its fields, and a sweep its stages' configs:
     none of their fields is a field of the sweep (its `canyons` is the canyon set evaluate's --canyons
-    takes, which EvalConfig holds as the canyons it names)."""
+    takes, which EvalConfig holds as the canyons it names). HeadConfig has no default for a setting
+    TrainConfig holds (a second default could disagree), and `TrainConfig.head` passes each on."""
     from depthq.data.labels import SampleConfig
     from depthq.data.recorder import CollectConfig
     from depthq.evaluate.online import EvalConfig
+    from depthq.nets.heads import HeadConfig
     from depthq.report.sweep import Sweep
     from depthq.train.config import TrainConfig
 
@@ -202,6 +204,17 @@ def test_no_setting_is_declared_twice() -> None:
 
     assert not names(TrainConfig) & names(SampleConfig)
     assert not names(Sweep) & (names(CollectConfig) | names(TrainConfig) | names(EvalConfig) - {"canyons"})
+
+    in_train = {"kind": "model", "form": "head_form"}  # HeadConfig's names that TrainConfig spells otherwise
+    shared = {f.name: in_train.get(f.name, f.name) for f in dataclasses.fields(HeadConfig)
+              if in_train.get(f.name, f.name) in names(TrainConfig)}
+    assert {"hidden", "dropout", "action_scale", "lookahead", "feature_projection", "form"} <= set(shared)
+    defaulted = [f.name for f in dataclasses.fields(HeadConfig) if f.name in shared
+                 and (f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)]
+    assert not defaulted, f"HeadConfig declares a default for TrainConfig's {defaulted}"
+    train = TrainConfig(model="depth", data="-", hidden=8, dropout=0.25, action_scale=3.0, lookahead=2,
+                        feature_projection=5)
+    assert all(getattr(train.head(), name) == getattr(train, of) for name, of in shared.items())
 
 
 def test_verbs_are_found_here(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from paper_head import paper_head
 
 from depthq.cli import main
 from depthq.control.action_selection import TIE_TOL, select_coll_action, select_depth_action
@@ -22,7 +23,7 @@ from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
 from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
 from depthq.evaluate.online import EvalConfig, drive, evaluate, parse_canyon_set, shares
-from depthq.nets.heads import HeadConfig, QNet, build_head
+from depthq.nets.heads import QNet, build_head
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.sim.env import CanyonEnv
@@ -36,8 +37,8 @@ def _untrained() -> list[QNetPolicy]:
     initialised heads (bits need no training)."""
     torch.manual_seed(0)
     trunk = build_trunk(DEFAULT_TRUNK)
-    heads = [HeadConfig("depth", trunk.feature_dim), HeadConfig("depth", trunk.feature_dim, lookahead=3),
-             HeadConfig("coll", trunk.feature_dim)]
+    heads = [paper_head("depth", trunk.feature_dim), paper_head("depth", trunk.feature_dim, lookahead=3),
+             paper_head("coll", trunk.feature_dim)]
     return [QNetPolicy(QNet(trunk, build_head(head)), head.kind) for head in heads]
 
 

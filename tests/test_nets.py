@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 import skimage.data
 import torch
+from paper_head import paper_head
 from torch import nn
 
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
-from depthq.nets.heads import CollHead, DepthHead, HeadConfig, QNet, build_head, probability
+from depthq.nets.heads import CollHead, DepthHead, QNet, build_head, probability
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.mobilenet_v1 import MobileNetV1
 from depthq.nets.optim import EPS, RHO, make_optimizer
@@ -164,8 +165,8 @@ def test_coll_bce_on_extreme_logits_is_finite_and_right():
 
 
 def test_heads_shapes_init_and_config():
-    depth = build_head(HeadConfig("depth", 256))
-    coll = build_head(HeadConfig("coll", 256))
+    depth = build_head(paper_head("depth", 256))
+    coll = build_head(paper_head("coll", 256))
     assert isinstance(depth, DepthHead) and isinstance(coll, CollHead)
     features, actions = torch.randn(5, 256), torch.tensor([-1.0, 0, 1, 0.5, 0])
     assert depth(features, actions).shape == (5, 26) and (depth(features, actions) >= 0).all()
@@ -174,9 +175,9 @@ def test_heads_shapes_init_and_config():
     for bad, match in (({"kind": "value"}, "kind"), ({"hidden": 0}, "hidden"), ({"dropout": 1.0}, "dropout"),
                        ({"action_scale": 0.0}, "action_scale")):
         with pytest.raises(ConfigError, match=match):
-            HeadConfig(**{"kind": "depth", "feature_dim": 256, **bad})
+            paper_head(**{"kind": "depth", "feature_dim": 256, **bad})
     # action_scale s feeds s·a to the hidden layer: the same weights see action a as the plain head sees s·a
-    scaled = build_head(HeadConfig("depth", 256, action_scale=10.0))
+    scaled = build_head(paper_head("depth", 256, action_scale=10.0))
     scaled.load_state_dict(depth.state_dict())
     scaled.eval(), depth.eval()  # no dropout
     torch.testing.assert_close(scaled(features, actions), depth(features, 10.0 * actions))
@@ -185,7 +186,7 @@ def test_heads_shapes_init_and_config():
 @pytest.mark.parametrize("kind", ["depth", "coll"])
 def test_q_values_run_the_trunk_once(effnet_trunk, kind):
     torch.manual_seed(0)
-    qnet = QNet(effnet_trunk, build_head(HeadConfig(kind, 1280))).eval()
+    qnet = QNet(effnet_trunk, build_head(paper_head(kind, 1280))).eval()
     calls = []
     handle = effnet_trunk.register_forward_hook(lambda *_: calls.append(1))
     frame, actions = torch.rand(1, 3, 128, 128), torch.tensor([-1.0, 0.0, 1.0])
@@ -203,7 +204,7 @@ def test_q_values_run_the_trunk_once(effnet_trunk, kind):
 
 
 def test_optimizer_decays_conv_weights_only():
-    qnet = QNet(build_trunk("mobilenet_v1_025"), build_head(HeadConfig("depth", 256)))
+    qnet = QNet(build_trunk("mobilenet_v1_025"), build_head(paper_head("depth", 256)))
     opt = make_optimizer(qnet, lr=0.1)
     assert isinstance(opt, torch.optim.Adadelta)
     conv_weights = {id(m.weight) for m in qnet.modules() if isinstance(m, nn.Conv2d)}
@@ -216,7 +217,7 @@ def test_optimizer_decays_conv_weights_only():
 
 @pytest.mark.filterwarnings("ignore:`torch.jit.script_method` is deprecated:DeprecationWarning")  # torch's
 def test_optimizer_leaves_out_a_frozen_trunk(effnet_trunk):
-    qnet = QNet(effnet_trunk, build_head(HeadConfig("coll", 1280)))
+    qnet = QNet(effnet_trunk, build_head(paper_head("coll", 1280)))
     opt = make_optimizer(qnet, lr=0.01)
     assert [g["weight_decay"] for g in opt.param_groups] == [0.0]
     assert {id(p) for g in opt.param_groups for p in g["params"]} == {id(p) for p in qnet.head.parameters()}
@@ -230,7 +231,7 @@ def test_unknown_trunk_is_a_config_error():
 
 def test_head_feature_dim_must_match_trunk():
     with pytest.raises(ConfigError, match="feature_dim=1280"):
-        QNet(build_trunk("mobilenet_v1_025"), build_head(HeadConfig("depth", 1280)))
+        QNet(build_trunk("mobilenet_v1_025"), build_head(paper_head("depth", 1280)))
 
 
 def test_column_features_keep_left_and_right():
@@ -272,7 +273,7 @@ def test_relative_depth_loss_divides_each_error_by_its_target_by_hand():
 
 def test_a_per_action_head_predicts_each_anchor_and_blends_between():
     torch.manual_seed(0)
-    head = build_head(HeadConfig("depth", 32, hidden=16, form="per_action")).eval()
+    head = build_head(paper_head("depth", 32, hidden=16, form="per_action")).eval()
     assert head.hidden.in_features == 32 and head.output.out_features == 3 * 26  # the action is no input
     feature = torch.randn(1, 32).repeat(5, 1)
     out = head(feature, torch.tensor([-1.0, -0.5, 0.0, 1.0, 3.0]))
@@ -282,7 +283,7 @@ def test_a_per_action_head_predicts_each_anchor_and_blends_between():
     torch.testing.assert_close(out[4], anchors[2])  # beyond the anchors: clipped to the last
     for bad in ({"kind": "coll"}, {"lookahead": 2}, {"form": "dueling"}):
         with pytest.raises(ConfigError, match="form"):
-            HeadConfig(**{"kind": "depth", "feature_dim": 32, "form": "per_action", **bad})
+            paper_head(**{"kind": "depth", "feature_dim": 32, "form": "per_action", **bad})
 
 
 def test_the_grid_feature_keeps_rows_and_columns_of_the_block_map():
@@ -299,7 +300,7 @@ def test_the_grid_feature_keeps_rows_and_columns_of_the_block_map():
 
 def test_a_depth_first_head_perceives_the_current_bins_then_advances_them():
     torch.manual_seed(0)
-    head = build_head(HeadConfig("depth", 32, hidden=16, form="depth_first")).eval()
+    head = build_head(paper_head("depth", 32, hidden=16, form="depth_first")).eval()
     assert head.hidden.in_features == 32 and head.output["dynamics"][0].in_features == 26 + 1
     feature, action = torch.randn(4, 32), torch.tensor([-1.0, 0.0, 1.0, 0.5])
     with torch.no_grad():
@@ -309,4 +310,4 @@ def test_a_depth_first_head_perceives_the_current_bins_then_advances_them():
         moved = head.advance(torch.ones(2, 26), torch.tensor([-1.0, 1.0]))
         assert (moved >= 0).all() and not torch.equal(moved[0], moved[1])  # the action matters
     with pytest.raises(ConfigError, match="depth_first"):
-        HeadConfig("coll", 32, form="depth_first")
+        paper_head("coll", 32, form="depth_first")

@@ -11,12 +11,13 @@ import torch
 from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import HeadConfig, QNet, build_head
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
+from depthq.nets.heads import QNet, build_head
+from depthq.nets.trunk import build_trunk
 from depthq.parallel import cores
 from depthq.policies.qnet import QNetPolicy
 from depthq.policies.registry import make_policy
 from depthq.sim.env import CanyonEnv
+from depthq.train.config import TrainConfig
 
 BATCH = 20  # the evaluation canyons: one lock-step step of a single worker
 
@@ -92,10 +93,11 @@ def bench_policy(
 
 
 def untrained_depth_policy(device: str) -> QNetPolicy:
-    """A freshly initialised Depth-Q-Net of the default trunk: a policy's latency depends on the
-    trunk and the head's shape, not on the weights."""
-    trunk = build_trunk(DEFAULT_TRUNK)
-    return QNetPolicy(QNet(trunk, build_head(HeadConfig("depth", trunk.feature_dim))), "depth", device=device)
+    """A freshly initialised Depth-Q-Net as `depthq train --model depth` builds it by default: a
+    policy's latency depends on the trunk and the head's shape, not on the weights."""
+    config = TrainConfig(model="depth", data="-")  # its defaults; no data: nothing is trained
+    net = QNet(build_trunk(config.trunk), build_head(config.head()))
+    return QNetPolicy(net, "depth", device=device)
 
 
 def _batch_figures(ms: list[float]) -> dict:

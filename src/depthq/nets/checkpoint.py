@@ -34,8 +34,9 @@ load, with a warning that they cannot be verified.
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
 Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
-without `precision` a float32 training. Fields renamed within version 3 read under their new names:
-`train.select` as `train.weights`, `policy.selection` as `policy.rule`; the sample settings a train
+without `precision` a float32 training; a head without `action_scale` takes the action unscaled (1),
+one without `form` is the paper's ("concat"). Fields renamed within version 3 read under their new
+names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`; the sample settings a train
 record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`, `action_lag`) read
 inside `train.samples`, where TrainConfig holds them now. A newer version is refused by name.
 """
@@ -84,6 +85,12 @@ _LEGACY_DECISION_HZ = 4.0
 # folder still loads and resumes.
 _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
                 "head_form": "concat", "labels": "lidar"}
+# HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
+# field (action_scale, lookahead, feature_projection, form, in that order) or, for `form`, at "concat",
+# which records left out until HeadConfig's defaults moved to TrainConfig (#33). These are the defaults
+# HeadConfig had then: the paper's head, the action unscaled. Every record holds kind, feature_dim,
+# hidden, n_bins and dropout (written by dataclasses.asdict from the first checkpoint on).
+_ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "form": "concat"}
 # Fields renamed within version 3 (old name → new), as a record written before the rename reads.
 _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 # TrainConfig fields moved into a nested config within version 3 (#33: its sample settings into
@@ -230,6 +237,9 @@ def read_config(folder: Path) -> dict[str, Any]:
         )
     record = _renamed(record)
     record = record if version == FORMAT_VERSION else _upgrade(record)
+    head = record.get("head")
+    if isinstance(head, dict):
+        record = {**record, "head": {**_ADDED_HEAD, **head}}
     return {**record, "train": _nested({**_ADDED_TRAIN, **record.get("train", {})})}
 
 

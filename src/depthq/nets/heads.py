@@ -23,7 +23,7 @@ dict and outputs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -31,7 +31,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from depthq.configio import OMIT_DEFAULT
 from depthq.data.labels import check_lookahead
 from depthq.errors import ConfigError
 from depthq.nets.trunk import Trunk
@@ -60,18 +59,18 @@ def _positive_int(value: object) -> bool:
 
 @dataclass(frozen=True)
 class HeadConfig:
-    """Shape of a head; `feature_dim` must equal the trunk's."""
+    """Shape of a head; `feature_dim` must equal the trunk's. Its settings have no defaults here:
+    `TrainConfig` declares them (`TrainConfig.head`), a checkpoint's record holds them (#33)."""
 
     kind: HeadKind
     feature_dim: int
-    hidden: int = 4096
-    n_bins: int = 26
-    dropout: float = 0.5
-    action_scale: float = 1.0  # the action enters the hidden layer as action_scale · a
-    lookahead: int = 1  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
-    feature_projection: int = 0  # P > 0: the feature projected to P numbers first; 0: none
-    form: str = field(default="concat", metadata=OMIT_DEFAULT)  # one of HEAD_FORMS
-
+    hidden: int
+    dropout: float
+    action_scale: float  # the action enters the hidden layer as action_scale · a
+    lookahead: int  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
+    feature_projection: int  # P > 0: the feature projected to P numbers first; 0: none
+    form: str  # one of HEAD_FORMS (`TrainConfig.head_form`)
+    n_bins: int = 26  # the depth bins (`depthq.sim.sensors.BinConfig`); not a training setting
 
     def __post_init__(self) -> None:
         if self.kind not in HEAD_KINDS:
