@@ -8,10 +8,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from depthq.data.manifest import Dataset
-from depthq.experiments import camera_labels
+from depthq.experiments import camera_labels, label_bands
 from depthq.nets.checkpoint import read_config
 
 TOY = [
@@ -103,3 +104,18 @@ def test_the_experiment_labels_a_copy_trains_drives_tabulates_and_resumes(
     assert camera_labels.main(["run", str(smoke), str(tmp_path / "p"), "--method", "perception"]) == 2
     assert "--labeller-data" in capsys.readouterr().err and not (tmp_path / "p").exists()
     assert _stamps(out) == stamps
+
+    # The band diagnostic on the same folder: the LiDAR's bins under 1 m in the camera labels' place.
+    argv = ["run", str(out), "--band", "near", "--split", "1", "--runs", "6", "--device", "cpu",
+            "--no-progress"]
+    assert label_bands.main([*argv, *TOY[TOY.index("--set") :]]) == 0
+    assert "| LiDAR near of 1 m, camera beyond | 0 |" in capsys.readouterr().out
+    mix = Dataset.open(out / "bands" / "near_1" / "data")
+    for entry in mix.entries():
+        run = mix.read_run(entry, images=False)
+        with labelled.reader(labelled.entry(entry.split, entry.index)) as reader:
+            camera = reader.camera_labels().bins
+        expected = label_bands.mixed(run.bins, camera, "near", 1.0)
+        assert np.array_equal(run.camera.bins, expected, equal_nan=True)
+        assert run.camera.labeller == label_bands.NAME
+    assert _summary(out / "bands" / "near_1" / "eval" / "depth_n6_s0")["config"]["canyons"] == ["val:1000"]

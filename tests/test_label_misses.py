@@ -14,7 +14,7 @@ import pytest
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
-from depthq.experiments import label_memory, label_misses
+from depthq.experiments import label_bands, label_memory, label_misses
 from depthq.sim.sensors import BinConfig
 from depthq.train.labeller import LabellerConfig, train_labeller
 
@@ -34,6 +34,14 @@ def test_a_bins_nearest_reading_hits_the_pillar_it_reads() -> None:
     moved = pillar + np.array([1.0, 0.0, 0.0])  # 1 m to the side
     assert label_misses.is_pillar(hits[12], pillar) and not label_misses.is_pillar(hits[12], moved)
     assert not label_misses.is_pillar(hits[12], np.zeros((0, 3)))  # the paper's canyons have none
+
+
+def test_a_band_mix_takes_the_lidar_where_it_reads_in_the_band() -> None:
+    lidar = np.array([[0.4, 1.0, 1.7, np.nan]], np.float32)
+    camera = np.array([[0.9, 0.8, 2.0, 0.5]], np.float32)
+    near, far = (label_bands.mixed(lidar, camera, band, 1.0) for band in ("near", "far"))
+    assert np.array_equal(near, np.float32([[0.4, 0.8, 2.0, 0.5]]))  # the LiDAR under 1 m
+    assert np.array_equal(far, np.float32([[0.9, 1.0, 1.7, 0.5]]))  # from 1 m on; invalid: the camera
 
 
 @pytest.mark.slow  # a toy floor labeller and a labelling of the hard family's small dataset: ~15 s

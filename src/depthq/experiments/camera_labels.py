@@ -360,7 +360,7 @@ def table(
     return "\n".join(lines)
 
 
-def _settings(items: list[str], what: str) -> tuple[tuple[str, Any], ...]:
+def parse_settings(items: list[str], what: str) -> tuple[tuple[str, Any], ...]:
     """'field=value' items (one value each) as (field path, value) pairs; a training's through
     `depthq sweep --set`'s parser (its checks and names)."""
     out = []
@@ -425,8 +425,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.action == "run":
             return run(args.sweep, args.out, args.method, labeller_data=args.labeller_data, runs=args.runs,
                        seeds=seeds, canyons=args.canyons, time_limit_s=args.time_limit,
-                       labeller_settings=_settings(args.labeller_set, "--labeller-set"),
-                       training=_settings(args.set, "--set"), workers=args.workers, device=args.device,
+                       labeller_settings=parse_settings(args.labeller_set, "--labeller-set"),
+                       training=parse_settings(args.set, "--set"), workers=args.workers, device=args.device,
                        progress=not args.no_progress)
         print(table(args.outs, args.runs, seeds, workers=args.workers, device=args.device,
                     progress=not args.no_progress))
