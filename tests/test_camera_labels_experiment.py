@@ -109,7 +109,7 @@ def test_the_experiment_labels_a_copy_trains_drives_tabulates_and_resumes(
     argv = ["run", str(out), "--band", "near", "--split", "1", "--runs", "6", "--device", "cpu",
             "--no-progress"]
     assert label_bands.main([*argv, *TOY[TOY.index("--set") :]]) == 0
-    assert "| LiDAR near of 1 m, camera beyond | 0 |" in capsys.readouterr().out
+    assert "| LiDAR under 1 m, camera beyond | 0 |" in capsys.readouterr().out
     mix = Dataset.open(out / "bands" / "near_1" / "data")
     for entry in mix.entries():
         run = mix.read_run(entry, images=False)
