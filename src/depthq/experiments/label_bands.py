@@ -91,7 +91,8 @@ def run(out: Path, band: str, split: float = 1.0, seeds: tuple[int, ...] = (0,),
         evaluate_once(folder / "models" / name, folder / "eval" / name, setup, workers, device, progress)
         summary = read_json(folder / "eval" / name / SUMMARY)["summary"]
         distances.append(summary["distance_to_collision_mean"])
-        where = f"under {split:g} m, camera beyond" if band == "near" else f"from {split:g} m on, camera nearer"
+        where = (f"under {split:g} m, camera beyond" if band == "near"
+                 else f"from {split:g} m on, camera nearer")
         rows.append(f"| LiDAR {where} | {seed} | "
                     f"{summary['distance_to_collision_mean']:.2f} | {summary['reached_end']} | "
                     f"{summary['collisions']} |")
