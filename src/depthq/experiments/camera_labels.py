@@ -50,9 +50,10 @@ from depthq.configio import atomic_write_bytes, from_dict, read_json, to_dict, w
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import ERROR_BANDS, stats_report
-from depthq.errors import ConfigError, explain
+from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments.cells import mean_interval
+from depthq.experiments.cli import guarded
 from depthq.flags import build_config
 from depthq.nets.checkpoint import CONFIG, read_config
 from depthq.report.layout import model_name
@@ -420,7 +421,8 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("outs", type=Path, nargs="+", metavar="OUT",
                       help="experiment folders of `run` (each knows its sweep and canyons)")
     args = parser.parse_args(argv)
-    try:
+
+    def work() -> int:
         seeds = parse_ints(args.seeds, "--seeds")
         if args.action == "run":
             return run(args.sweep, args.out, args.method, labeller_data=args.labeller_data, runs=args.runs,
@@ -431,12 +433,8 @@ def main(argv: list[str] | None = None) -> int:
         print(table(args.outs, args.runs, seeds, workers=args.workers, device=args.device,
                     progress=not args.no_progress))
         return 0
-    except Exception as err:
-        status, line = explain(err)
-        if status is None:
-            raise
-        print(f"{PROG} {args.action}: {line}", file=sys.stderr)
-        return status
+
+    return guarded(f"{PROG} {args.action}", work)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from tqdm import tqdm
 from depthq.configio import read_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError, explain
+from depthq.errors import ConfigError
 from depthq.experiments.camera_labels import (
     SUMMARY,
     camera_config,
@@ -34,6 +34,7 @@ from depthq.experiments.camera_labels import (
     read_setup,
 )
 from depthq.experiments.cells import mean_interval
+from depthq.experiments.cli import guarded
 from depthq.report.layout import model_name
 from depthq.report.sweep import parse_ints
 from depthq.train.trainer import train
@@ -117,16 +118,13 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--device", default="auto", help="torch device (default: auto)")
     go.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
-    try:
+
+    def work() -> int:
         print(run(args.out, args.band, args.split, parse_ints(args.seeds, "--seeds"), args.runs,
                   parse_settings(args.set, "--set"), args.workers, args.device, not args.no_progress))
         return 0
-    except Exception as err:
-        status, line = explain(err)
-        if status is None:
-            raise
-        print(f"{PROG} {args.action}: {line}", file=sys.stderr)
-        return status
+
+    return guarded(f"{PROG} {args.action}", work)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,8 @@ from tqdm import tqdm
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
-from depthq.errors import ConfigError, explain
+from depthq.errors import ConfigError
+from depthq.experiments.cli import guarded
 from depthq.train import floor
 from depthq.train.labeller import check_applicable, load_labeller
 
@@ -83,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="also write the result as JSON here")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    try:
+
+    def work() -> int:
         try:
             memories = tuple(float(m) for m in args.memory.split(","))
         except ValueError:
@@ -93,12 +95,8 @@ def main(argv: list[str] | None = None) -> int:
             write_json(args.json, result)
         print(table(result))
         return 0
-    except Exception as err:
-        status, line = explain(err)
-        if status is None:
-            raise
-        print(f"{PROG}: {line}", file=sys.stderr)
-        return status
+
+    return guarded(PROG, work)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,8 @@ import numpy as np
 
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError, explain
+from depthq.errors import ConfigError
+from depthq.experiments.cli import guarded
 from depthq.experiments.truth import canyon
 from depthq.sim.canyon import FAMILIES, CanyonId, generate_canyon
 from depthq.sim.mjcf import RobotConfig
@@ -139,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--far", type=float, default=0.0, help="... and not nearer than this, m (default: 0)")
     parser.add_argument("--json", type=Path, default=None, help="also write the result as JSON here")
     args = parser.parse_args(argv)
-    try:
+
+    def work() -> int:
         if not 0 <= args.far < args.near:
             raise ConfigError(f"--far and --near must satisfy 0 <= far < near, got {args.far}, {args.near}")
         result = measure(Dataset.open(args.data), args.split, args.near, args.far)
@@ -147,12 +149,8 @@ def main(argv: list[str] | None = None) -> int:
             write_json(args.json, result)
         print(table(result))
         return 0
-    except Exception as err:
-        status, line = explain(err)
-        if status is None:
-            raise
-        print(f"{PROG}: {line}", file=sys.stderr)
-        return status
+
+    return guarded(PROG, work)
 
 
 if __name__ == "__main__":
