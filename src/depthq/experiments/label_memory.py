@@ -49,8 +49,7 @@ def measure(labeller: Path, dataset: Dataset, memories: tuple[float, ...], split
         readings = estimate.readings(run.images)
         lidar.append(run.bins)
         for m in memories:
-            fused = floor.remember(readings, run.poses, run.times, estimate.geo, m) if m else readings
-            camera[m].append(estimate.geo.bins_of(fused))
+            camera[m].append(estimate.bins(readings, run, m))
     truth = np.concatenate(lidar)
     rows = {str(m): label_errors(truth, np.concatenate(camera[m]), len(entries)) for m in memories}
     return {"labeller": str(labeller), "data": str(dataset.root), "split": split, "memory_s": rows}

@@ -103,14 +103,17 @@ def remember(readings: np.ndarray, poses: np.ndarray, times: np.ndarray, geo: Ge
     poses = poses.astype(np.float64)
     heading = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)
     sensor = poses[:, :2] + geo.robot.sensor_offset_x * heading
+    points = []  # each frame's obstacle points in the world, (x, y), computed once
+    for k in range(len(readings)):
+        seen = readings[k] < geo.bins.clip
+        angle = poses[k, 2] + bearings[seen]
+        points.append((sensor[k, 0] + readings[k, seen] * np.cos(angle),
+                       sensor[k, 1] + readings[k, seen] * np.sin(angle)))
     for t in range(1, len(readings)):
         for k in range(t - 1, -1, -1):
             if times[t] - times[k] > memory_s + 1e-6:
                 break
-            seen = readings[k] < geo.bins.clip
-            angle = poses[k, 2] + bearings[seen]
-            dx = sensor[k, 0] + readings[k, seen] * np.cos(angle) - sensor[t, 0]
-            dy = sensor[k, 1] + readings[k, seen] * np.sin(angle) - sensor[t, 1]
+            dx, dy = points[k][0] - sensor[t, 0], points[k][1] - sensor[t, 1]
             bearing = (np.rad2deg(np.arctan2(dy, dx) - poses[t, 2]) + 180) % 360 - 180
             index = np.round(geo.bins.first_bearing - bearing).astype(int)
             inside = (index >= 0) & (index < geo.bins.n_readings)
@@ -244,10 +247,13 @@ class FloorEstimate:
         self.top = max(0, int(geo.shape[0] / 2) - RECEPTIVE_RADIUS - 1)
 
     def __call__(self, run: Run) -> np.ndarray:
-        readings = self.readings(run.images)
-        if self.memory_s:
-            readings = remember(readings, run.poses, run.times, self.geo, self.memory_s)
-        return self.geo.bins_of(readings).astype(np.float32)
+        return self.bins(self.readings(run.images), run, self.memory_s)
+
+    def bins(self, readings: np.ndarray, run: Run, memory_s: float) -> np.ndarray:
+        """A run's own readings → its bins (N, n_bins) float32, with a memory of `memory_s` s (0: none)."""
+        if memory_s:
+            readings = remember(readings, run.poses, run.times, self.geo, memory_s)
+        return self.geo.bins_of(readings)
 
     @torch.inference_mode()
     def readings(self, frames: np.ndarray) -> np.ndarray:
