@@ -11,6 +11,7 @@ import pytest
 
 from depthq.errors import ConfigError
 from depthq.experiments import oracle_gap, privileged
+from depthq.report.findings import FINDINGS, read_findings
 
 
 @pytest.mark.slow
@@ -42,6 +43,17 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
              f"{depth['distance_to_collision_mean']:.2f} | "
              f"{depth['distance_to_collision_mean'] - coll['distance_to_collision_mean']:.2f} |")
     assert first in table
+    # The comparison as a claim's evidence in a copy of the findings file, in words made from the runs.
+    findings = tmp_path / "findings.json"
+    shutil.copy(FINDINGS, findings)
+    args = ["paired", str(smoke), "--sizes", "6", "--seeds", "0", "--claim", "table-i",
+            "--findings", str(findings)]
+    assert oracle_gap.main(args) == 0
+    canyons = json.loads((smoke / "reproduce.json").read_text())["sweep"]["canyons"]
+    evidence = read_findings(findings).claim("table-i").evidence[f"{canyons}, 4 Hz, 6 runs"]
+    assert f"Depth-Q-Net {depth['distance_to_collision_mean']:.2f} m" in evidence.text
+    assert evidence.by == "python -m depthq.experiments.oracle_gap " + " ".join(args)
+    assert oracle_gap.main([*args[:-4], "--claim", "no-such-claim", "--findings", str(findings)]) == 2
     stamp = (out / "agreement.json").stat().st_mtime_ns
     assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
     assert (out / "agreement.json").stat().st_mtime_ns == stamp

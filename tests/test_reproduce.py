@@ -1,6 +1,7 @@
 """The smoke preset end to end: real collection, training, evaluation and report (a few minutes)."""
 
 import csv
+import json
 import re
 import shutil
 from pathlib import Path
@@ -9,6 +10,9 @@ import pytest
 
 from depthq.cli import main
 from depthq.configio import read_json
+from depthq.errors import ConfigError
+from depthq.report.build import findings_sections
+from depthq.report.findings import FINDINGS, Evidence, read_findings, record_evidence
 from depthq.report.presets import get_preset
 from depthq.report.reproduce import build_stages, record_stage_time, reproduce
 from depthq.report.tables import interval
@@ -53,15 +57,38 @@ def test_report_is_self_contained_and_references_only_existing_files(smoke):
     assert "The paper&#x27;s claims here" in html or "The paper's claims here" in html
 
 
-def test_every_claim_of_the_report_points_at_an_existing_docs_page():
-    from depthq.report.html import CLAIMS
-
+def test_every_claim_and_deviation_of_the_report_points_at_an_existing_docs_page():
+    findings = read_findings()
     root = Path(__file__).resolve().parents[1]
-    for _, _, where in CLAIMS:
+    anchors = [c.where for c in findings.claims] + [d.doc for d in findings.deviations]
+    for where in anchors:
         pages = re.findall(r"docs/[\w/]+\.md", where)
         assert pages, where
         for page in pages:
             assert (root / page).is_file(), page
+    for d in findings.deviations:  # a deviation names its section, which must exist
+        page, _, anchor = d.doc.partition("#")
+        assert "{#" + anchor + "}" in (root / page).read_text(), d.doc
+
+
+def test_a_claims_evidence_is_written_and_read_back_and_bad_findings_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "findings.json"
+    shutil.copy(FINDINGS, path)
+    record_evidence("table-i", "somewhere, 4 Hz, 6 runs", Evidence("measured text", "a command"), path)
+    record_evidence("table-i", "somewhere, 4 Hz, 6 runs", Evidence("measured again", "a command"), path)
+    claim = read_findings(path).claim("table-i")
+    assert claim.evidence["somewhere, 4 Hz, 6 runs"] == Evidence("measured again", "a command")
+    before = path.read_bytes()
+    with pytest.raises(ConfigError, match=r"no claim 'nope'.*table-i"):
+        record_evidence("nope", "k", Evidence("t", "c"), path)
+    assert path.read_bytes() == before  # nothing written
+    raw = json.loads(before)
+    del raw["claims"][0]["verdict"]
+    path.write_text(json.dumps(raw))
+    with pytest.raises(ConfigError, match=r"not a findings file.*verdict"):
+        read_findings(path)
+    sections = dict(findings_sections(tmp_path / "absent.json"))
+    assert "source checkout" in sections["The paper's claims here"]
 
 
 @pytest.mark.slow

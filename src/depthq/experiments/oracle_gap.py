@@ -26,6 +26,8 @@ from depthq.cli import main as depthq
 from depthq.configio import read_json, write_json
 from depthq.evaluate.oracle import Oracle
 from depthq.experiments.cells import mean_interval
+from depthq.experiments.cli import guarded
+from depthq.report.findings import FINDINGS, Evidence, record_evidence
 from depthq.report.presets import get_preset
 from depthq.report.probe import measure_agreement
 from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget, widened
@@ -186,6 +188,19 @@ PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("suc
           ("closest mean (m)", "closest_mean", ".2f"))
 
 
+def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
+                   pattern: str = PATTERN) -> dict[int, dict[int, list[dict[str, Any]]]]:
+    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary."""
+    results: dict[int, dict[int, list[dict[str, Any]]]] = {}
+    for n in sizes:
+        for seed in seeds:
+            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed) / "summary.json"
+                     for net in ("coll", "depth")]
+            if all(f.is_file() for f in found):
+                results.setdefault(n, {})[seed] = [json.loads(f.read_text())["summary"] for f in found]
+    return results
+
+
 def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
     of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
@@ -193,19 +208,30 @@ def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern:
     out of their row. `pattern` names a model's evaluation folder under `sweep`."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
-    for n in sizes:
-        both = {}
-        for seed in seeds:
-            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed) / "summary.json"
-                     for net in ("coll", "depth")]
-            if all(f.is_file() for f in found):
-                both[seed] = [json.loads(f.read_text())["summary"] for f in found]
-        for label, key, fmt in PAIRED if both else ():
+    for n, both in paired_results(sweep, sizes, seeds, pattern).items():
+        for label, key, fmt in PAIRED:
             coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
             diff = [d - c for c, d in zip(coll, depth, strict=True)]
             cells = [mean_interval(v, fmt) for v in (coll, depth, diff)]
             lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
+                    pattern: str = PATTERN) -> dict[str, str]:
+    """The paired comparison in words, one sentence per size, keyed by where it was measured
+    ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
+    record = read_json(Path(sweep) / "reproduce.json")["sweep"]
+    out = {}
+    for n, both in paired_results(sweep, sizes, seeds, pattern).items():
+        coll, depth = ([float(s[i]["distance_to_collision_mean"]) for s in both.values()] for i in (0, 1))
+        diff = [d - c for c, d in zip(coll, depth, strict=True)]
+        ahead = sum(d > 0 for d in diff)
+        key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
+        out[key] = (f"to the first collision Depth-Q-Net {mean_interval(depth, '.2f')} m, Coll-Q-Net "
+                    f"{mean_interval(coll, '.2f')} m; Depth-Q-Net ahead in {ahead} of {len(diff)} seeds "
+                    f"(paired difference {mean_interval(diff, '.2f')} m)")
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -219,7 +245,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     parser.add_argument("--pattern", default=PATTERN,
                         help="paired: a model's evaluation folder under OUT, from {net}, {n} and {seed}")
+    parser.add_argument("--claim", help="paired: write the comparison as evidence of this claim of the "
+                                        "findings file (e.g. table-i), one entry per size")
+    parser.add_argument("--findings", type=Path, default=FINDINGS, help="paired --claim: the findings file")
     args = parser.parse_args(argv)
+    return guarded(f"python -m depthq.experiments.oracle_gap {args.action}", lambda: _act(args, argv))
+
+
+def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
     if args.action == "compare":
         pairs = [item.partition("=") for item in args.out.split(",")]
         print(compare([(name, Path(folder)) for name, _, folder in pairs]))
@@ -228,6 +261,11 @@ def main(argv: list[str] | None = None) -> int:
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
     if args.action == "paired":
         print(paired(args.out, setup.sizes, setup.seeds, args.pattern))
+        if args.claim:
+            command = "python -m depthq.experiments.oracle_gap " + " ".join(argv or sys.argv[1:])
+            for key, text in paired_evidence(args.out, setup.sizes, setup.seeds, args.pattern).items():
+                record_evidence(args.claim, key, Evidence(text, command), args.findings)
+                print(f"{args.findings}: claim {args.claim}, {key}: {text}")
         return 0
     if args.action == "run":
         return run(args.out, setup)

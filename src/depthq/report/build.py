@@ -11,6 +11,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
+from depthq.report.findings import FINDINGS, read_findings
 from depthq.report.sweep import Sweep
 from depthq.report.tables import (
     csv_text,
@@ -104,15 +105,7 @@ def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> No
             ),
             ("Fig. 5: convergence", page.img(out / "fig5_convergence.png", "Fig. 5")),
             ("Trajectories", "".join(page.img(p, alt) for p, alt in figures)),
-            (
-                "The paper's claims here",
-                "<p>What depthq's own measurements say (not this run's: see the pages named).</p>"
-                + page.table([{"claim": c, "here": h, "measured in": m} for c, h, m in page.CLAIMS]),
-            ),
-            (
-                "Deviations from the paper",
-                page.table([{"original": o, "ours": w, "why": y} for o, w, y in page.DEVIATIONS]),
-            ),
+            *findings_sections(),
             (
                 "Measured stage times (s)",
                 page.table([{"stage": k, "seconds": f"{v:.1f}"} for k, v in stage_seconds.items()]),
@@ -130,3 +123,24 @@ def build_report(out: Path, sweep: Sweep, stage_seconds: dict[str, float]) -> No
         ],
     )
     atomic_write_bytes(out / "report.html", html_text.encode())
+
+
+def findings_sections(path: Path = FINDINGS) -> list[tuple[str, str]]:
+    """The paper's claims (with the evidence the experiments wrote) and the deviations, from the
+    findings file; a note where the installation has none (a wheel carries no docs/)."""
+    if not path.is_file():
+        note = f"<p><em>{path} is part of depthq's source checkout; see docs/deviations.md there.</em></p>"
+        return [("The paper's claims here", note)]
+    found = read_findings(path)
+    claims = [
+        {"claim": c.claim, "here": c.verdict,
+         "measured": " ".join(f"{key}: {e.text} ({e.by})" for key, e in c.evidence.items()) or "–",
+         "measured in": c.where}
+        for c in found.claims
+    ]
+    deviations = [{"original": d.paper, "ours": d.depthq, "why": d.why, "measured in": d.doc}
+                  for d in found.deviations]
+    intro = "<p>What depthq's own measurements say (not this run's: see the pages named).</p>"
+    return [("The paper's claims here", intro + page.table(claims)),
+            ("Deviations from the paper", page.table(deviations))]
+
