@@ -129,7 +129,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
 
     # A sweep finds a finished folder trained otherwise than the model of that name now means (the
     # paper's head, before the depth-first head became the default): an error, not a reused model.
-    from depthq.report.reproduce import _trained
+    from depthq.pipeline.stages import _trained
     with pytest.raises(ConfigError, match=r"differs in: head_form, weights"):
         _trained(_config(data, epochs=1), out)
     assert _trained(_config(data, epochs=1, head_form="concat"), out)
@@ -307,8 +307,8 @@ def test_bad_weights_or_snapshots_are_refused_by_name(change: dict, message: str
 def test_a_sweep_varies_weights_and_snapshots() -> None:
     from dataclasses import replace
 
-    from depthq.report.presets import get_preset
-    from depthq.report.sweep import parse_setting
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting
 
     assert parse_setting("weights=final") == parse_setting("select=final") == ("weights", ("final",))
     assert parse_setting("snapshots=40,20+40") == ("snapshots", ((40,), (20, 40)))

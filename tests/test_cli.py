@@ -71,7 +71,7 @@ def test_renamed_flags_keep_their_old_spellings() -> None:
 
 
 def test_sweep_set_takes_the_flag_names_too() -> None:
-    from depthq.report.sweep import parse_setting
+    from depthq.pipeline.sweep import parse_setting
 
     expected = ("action_scale", (1.0, 10.0))
     assert parse_setting("action-scale=1,10") == parse_setting("action_scale=1,10") == expected

@@ -54,9 +54,33 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert f"Depth-Q-Net {depth['distance_to_collision_mean']:.2f} m" in evidence.text
     assert evidence.by == "python -m depthq.experiments.oracle_gap " + " ".join(args)
     assert oracle_gap.main([*args[:-4], "--claim", "no-such-claim", "--findings", str(findings)]) == 2
+    assert "| agrees, decisive steps | 2 | – | – |" in oracle_gap.predicts(out)  # 2 models: no ρ
+    oracle_gap.plot_predicts(out, out / "diagnostics.png")
+    assert (out / "diagnostics.png").stat().st_size > 5000
+    failing = oracle_gap.where_it_fails(out)  # which states, actions and bins, per model
+    assert set(failing) == set(names) and all(len(r["bin_error"]) == 26 for r in failing.values())
+    assert all(abs(sum(r["mistakes"]) - 1) < 1e-9 or sum(r["mistakes"]) == 0 for r in failing.values())
+    assert oracle_gap.where(out).count("| `depth_n6_s0") == 2
+    oracle_gap.plot_where(out, out / "where.png")
+    assert (out / "where.png").stat().st_size > 5000
     stamp = (out / "agreement.json").stat().st_mtime_ns
     assert oracle_gap.run(out, setup, candidates) == 0  # resumed: nothing trained or measured again
     assert (out / "agreement.json").stat().st_mtime_ns == stamp
+
+
+def test_the_diagnostics_rank_correlation_with_driving(tmp_path: Path) -> None:
+    def model(agreement: float, distance: float, pillars: int) -> dict:
+        return {"agreement": agreement, "agreement_decisive": 1 - agreement, "collisions": 4,
+                "collisions_with_pillar": pillars, "distance_to_collision_mean": distance}
+
+    measured = {"a": model(0.2, 5.0, 4), "b": model(0.5, 9.0, 2), "c": model(0.4, 7.0, 3),
+                "d": model(0.9, 20.0, 0)}
+    (tmp_path / "agreement.json").write_text(json.dumps(measured))
+    rows = oracle_gap.predicts(tmp_path).splitlines()
+    assert "| agrees with the oracle, all steps | 4 | +1.00 | 0.000 |" in rows
+    assert "| agrees, decisive steps | 4 | -1.00 | 0.000 |" in rows
+    assert "| pillar share of the collisions | 4 | -1.00 | 0.000 |" in rows
+    assert "| same decision under new pixel noise | 0 | – | – |" in rows  # not measured: no value
 
 
 @pytest.mark.slow

@@ -143,9 +143,9 @@ def test_collect_in_the_hard_family_records_it(tmp_path):
 
 
 def test_sweep_setup_records_the_family_and_refuses_another(tmp_path):
-    from depthq.report.presets import PRESETS
-    from depthq.report.reproduce import _claim
-    from depthq.report.sweep import retarget
+    from depthq.pipeline.presets import PRESETS
+    from depthq.pipeline.stages import _claim
+    from depthq.pipeline.sweep import retarget
 
     hard = PRESETS["hard"]
     assert hard.setup()["family"] == "hard" and hard.canyons == "hard/eval"

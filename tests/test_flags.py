@@ -166,8 +166,8 @@ def test_the_old_verb_spellings_parse_to_the_same_config() -> None:
 
 def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
     """--set horizon=2 is --set samples.horizon=2, and the model folder keeps the name it had."""
-    from depthq.report.presets import get_preset
-    from depthq.report.sweep import parse_setting, widened
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting, widened
 
     assert parse_setting("horizon=2,5") == parse_setting("samples.horizon=2,5") == ("samples.horizon", (2, 5))
     sweep = widened(get_preset("smoke"), nets=("coll",), grid=(parse_setting("horizon=2,5"),))
@@ -196,7 +196,7 @@ def test_no_setting_is_declared_twice() -> None:
     from depthq.data.recorder import CollectConfig
     from depthq.evaluate.online import EvalConfig
     from depthq.nets.heads import HeadConfig
-    from depthq.report.sweep import Sweep
+    from depthq.pipeline.sweep import Sweep
     from depthq.train.config import TrainConfig
 
     def names(cls: type) -> set[str]:

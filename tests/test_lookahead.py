@@ -220,8 +220,8 @@ def test_bad_lookahead_settings_are_refused_by_value(changes: dict, message: str
 
 
 def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
-    from depthq.report.presets import get_preset
-    from depthq.report.sweep import parse_setting
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting
     from depthq.scripts.train import add_arguments
 
     parser = argparse.ArgumentParser()

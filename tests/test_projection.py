@@ -101,8 +101,8 @@ def test_bad_projections_are_refused_by_value(changes: dict, message: str) -> No
 
 
 def test_flags_sweep_and_head_take_the_projection(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from depthq.report.presets import get_preset
-    from depthq.report.sweep import parse_setting
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting
     from depthq.scripts.train import add_arguments
 
     parser = argparse.ArgumentParser()

@@ -11,10 +11,11 @@ import pytest
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.errors import ConfigError
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.stages import build_stages, record_stage_time
 from depthq.report.build import findings_sections
 from depthq.report.findings import FINDINGS, Evidence, read_findings, record_evidence
-from depthq.report.presets import get_preset
-from depthq.report.reproduce import build_stages, record_stage_time, reproduce
+from depthq.report.reproduce import reproduce
 from depthq.report.tables import interval
 
 
@@ -209,8 +210,8 @@ def test_fig5_draws_a_sweep_whose_only_variant_is_not_the_preset(tmp_path):
     (it once looked for the preset's folder names and drew empty axes)."""
     from dataclasses import replace
 
+    from depthq.pipeline.sweep import parse_setting
     from depthq.report.figures import plot_fig5
-    from depthq.report.sweep import parse_setting
 
     sweep = replace(get_preset("smoke"), nets=("depth",), grid=(parse_setting("lookahead=3"),))
     plot_fig5(tmp_path, sweep, tmp_path / "empty.png")

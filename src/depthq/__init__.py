@@ -16,9 +16,12 @@ source against it, folders and files):
     ← train                                 the trainer, its checkpoints, and the offline metric that
                                             re-runs its validation
     ← evaluate | deploy                     online evaluation | ONNX export and the robot step
-    ← report | bench                        the reproduction pipeline | `depthq bench` figures
+    ← pipeline                              a sweep's grid, presets, run folder and resumable stages
+    ← report | bench                        a sweep folder's tables, figures, findings and HTML report |
+                                            `depthq bench` figures
+    ← experiments                           the measurements behind the docs, run as modules, and the
+                                            calibration probe (`depthq probe`)
     ← scripts ← cli                         one module per verb, the `depthq` command
-    ← experiments                           the measurements behind the docs, run as modules
 
 Names joined by `,` form one unit, whose modules may import each other; units on one line (`|`) do
 not import each other. This root module runs first and imports only `depthq.sim`'s `__init__` (the

@@ -25,13 +25,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.cli import main as depthq
 from depthq.configio import read_json
 from depthq.data.labels import HORIZON
 from depthq.experiments.cells import mean_interval
+from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import read_config
-from depthq.report.presets import get_preset
-from depthq.report.sweep import Sweep, parse_setting, retarget, widened
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.sweep import Sweep, parse_setting, retarget, widened
+from depthq.report.reproduce import run_sweep
 
 SIZES, SEEDS = (200, 500), (0, 1)
 PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "weights=final")
@@ -112,22 +113,12 @@ def folder(out: Path, rung: Rung) -> Path:
     return out / f"{rung.hz:g}hz"
 
 
-def sweep_args(ladder: Ladder, rung: Rung, net: str, seeds: tuple[int, ...], out: Path) -> list[str]:
-    """The `depthq sweep` arguments of a rung's network at `seeds`."""
-    args = ["sweep", "--preset", ladder.preset, "--canyons", ladder.canyons, "--runs", str(max(ladder.sizes)),
-            "--sizes", ",".join(map(str, ladder.sizes)),
-            "--seeds", ",".join(map(str, seeds)), "--nets", net, "--hz", f"{rung.hz:g}",
-            "--out", str(folder(out, rung))]
-    for setting in rung.settings(net):
-        args += ["--set", setting]
-    return args
-
-
-def sweep_of(ladder: Ladder, rung: Rung, net: str) -> Sweep:
-    """The Sweep that `sweep_args` runs, to find its models' folders."""
+def sweep_of(ladder: Ladder, rung: Rung, net: str, seeds: tuple[int, ...] | None = None) -> Sweep:
+    """A rung's sweep of one network (`depthq sweep --preset … --set …`), at `seeds` (the rung's)."""
     grid = tuple(parse_setting(s) for s in rung.settings(net))
-    return widened(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz),
-                   runs=max(ladder.sizes), subsets=ladder.sizes, seeds=rung.seeds, nets=(net,), grid=grid)
+    return widened(retarget(get_preset(ladder.preset), None, ladder.canyons, rung.hz), runs=max(ladder.sizes),
+                   name=f"{ladder.preset} sweep", subsets=ladder.sizes, seeds=seeds or rung.seeds,
+                   nets=(net,), grid=grid)
 
 
 def run(ladder: Ladder, out: Path) -> int:
@@ -137,10 +128,9 @@ def run(ladder: Ladder, out: Path) -> int:
             if seed not in rung.seeds:
                 continue
             for net in rung.nets:
-                args = sweep_args(ladder, rung, net, (seed,), out)
-                print("depthq " + " ".join(args), flush=True)
-                if (status := depthq(args)) != 0:
-                    return status
+                sweep = sweep_of(ladder, rung, net, (seed,))
+                print(f"{sweep.name} into {folder(out, rung)}: {net}, seed {seed}, {rung.name}", flush=True)
+                run_sweep(sweep, folder(out, rung))
     return table(ladder, out)
 
 
@@ -291,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("out", type=Path, help="the ladder's folder (a sweep per decision rate inside)")
     args = parser.parse_args(argv)
     ladder = LADDERS[args.family]
-    return run(ladder, args.out) if args.action == "run" else table(ladder, args.out)
+    work = run if args.action == "run" else table
+    return guarded(f"python -m depthq.experiments.ablation {args.action}", lambda: work(ladder, args.out))
 
 
 if __name__ == "__main__":

@@ -56,8 +56,8 @@ from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
 from depthq.flags import build_config
 from depthq.nets.checkpoint import CONFIG, read_config
-from depthq.report.layout import model_name
-from depthq.report.sweep import parse_ints, parse_setting
+from depthq.pipeline.layout import model_name
+from depthq.pipeline.sweep import parse_ints, parse_setting
 from depthq.sim.canyon import PAPER
 from depthq.train.config import TrainConfig
 from depthq.train.folder import saved_epoch

@@ -35,8 +35,8 @@ from depthq.experiments.camera_labels import (
 )
 from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
-from depthq.report.layout import model_name
-from depthq.report.sweep import parse_ints
+from depthq.pipeline.layout import model_name
+from depthq.pipeline.sweep import parse_ints
 from depthq.train.trainer import train
 
 PROG = "python -m depthq.experiments.label_bands"

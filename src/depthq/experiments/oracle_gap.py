@@ -4,13 +4,16 @@ along its own runs.
 
     python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500]
     python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500]
+    python -m depthq.experiments.oracle_gap predicts OUT [--figure PATH]
     python -m depthq.experiments.oracle_gap paired SWEEP [--seeds 0,1,2] [--sizes 200,500]
 
 `run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
 measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
-measured once); `table` prints the Markdown table of what has finished. The `eval` canyons are never
-driven here. `paired` reads any sweep folder of both networks (e.g. a preset's Table I in the `eval`
-canyons) and compares them seed by seed.
+measured once); `table` prints the Markdown table of what has finished; `predicts` how well each of
+the diagnostic's measures predicts driving across all of them (and a figure). The `eval` canyons are
+never driven here. `paired` reads any sweep folder of both networks (e.g. a preset's Table I in the `eval`
+canyons) and compares them seed by seed; with `--claim ID` it writes that as the claim's evidence in
+docs/findings.json.
 """
 
 from __future__ import annotations
@@ -19,18 +22,27 @@ import argparse
 import json
 import sys
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
-from depthq.cli import main as depthq
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from scipy.stats import spearmanr
+
 from depthq.configio import read_json, write_json
+from depthq.control.action_selection import ACTIONS
 from depthq.evaluate.oracle import Oracle
 from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
+from depthq.experiments.probe import agreement_file, measure_agreement
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.sweep import Sweep, parse_ints, parse_setting, retarget, widened
 from depthq.report.findings import FINDINGS, Evidence, record_evidence
-from depthq.report.presets import get_preset
-from depthq.report.probe import measure_agreement
-from depthq.report.sweep import Sweep, parse_ints, parse_setting, retarget, widened
+from depthq.report.reproduce import run_sweep
 
 
 @dataclass(frozen=True)
@@ -80,28 +92,22 @@ class Setup:
     seeds: tuple[int, ...] = (0,)
 
 
-def sweep_args(setup: Setup, candidate: Candidate, seed: int, out: Path) -> list[str]:
-    args = ["sweep", "--preset", setup.preset, "--runs", str(setup.runs),
-            "--sizes", ",".join(map(str, setup.sizes)), "--seeds", str(seed), "--nets", candidate.net,
-            "--out", str(out)]
-    if setup.canyons:
-        args += ["--canyons", setup.canyons]
-    for setting in candidate.sets:
-        args += ["--set", setting]
-    return args
+def sweep_of(setup: Setup, candidate: Candidate, seeds: tuple[int, ...] | None = None) -> Sweep:
+    """A candidate's sweep (`depthq sweep --preset … --nets … --set …`), at `seeds` (the setup's)."""
+    return widened(
+        retarget(get_preset(setup.preset), None, setup.canyons),
+        runs=setup.runs,
+        name=f"{setup.preset} sweep",
+        subsets=setup.sizes,
+        seeds=seeds or setup.seeds,
+        nets=(candidate.net,),
+        grid=tuple(parse_setting(s) for s in candidate.sets),
+    )
 
 
 def model_names(setup: Setup, candidate: Candidate, size: int) -> list[str]:
     """The model folders a candidate's sweeps train at `size`, one per seed."""
-    sweep = widened(
-        retarget(get_preset(setup.preset), None, setup.canyons),
-        runs=setup.runs,
-        subsets=(size,),
-        seeds=setup.seeds,
-        nets=(candidate.net,),
-        grid=tuple(parse_setting(s) for s in candidate.sets),
-    )
-    return [m.name for m in Sweep.models(sweep)]
+    return [m.name for m in sweep_of(setup, candidate).models() if m.runs == size]
 
 
 def run(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES) -> int:
@@ -109,10 +115,8 @@ def run(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES)
     agreement measured as soon as it exists (an interrupted run keeps what it measured)."""
     for seed in setup.seeds:
         for candidate in candidates:
-            args = sweep_args(setup, candidate, seed, out)
-            print("depthq " + " ".join(args), flush=True)
-            if (status := depthq(args)) != 0:
-                return status
+            print(f"{out}: {candidate.name}, seed {seed}", flush=True)
+            run_sweep(sweep_of(setup, candidate, (seed,)), out)
             measure(out, setup, (candidate,))
     print(table(out, setup, candidates))
     return 0
@@ -170,6 +174,163 @@ def table(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATE
                      mean("same_decision_new_noise", ".0%")]
             lines.append("| " + " | ".join(map(str, cells)) + " |")
     return "\n".join(lines)
+
+
+# What the on-policy diagnostic measures of a model (`depthq probe --parts agreement --predictions`).
+DIAGNOSTICS = (
+    ("agrees with the oracle, all steps", "agreement"),
+    ("agrees, decisive steps", "agreement_decisive"),
+    ("agrees, last 2 s before a collision", "agreement_before_collision"),
+    ("same decision under new pixel noise", "same_decision_new_noise"),
+    ("candidates' score error (m)", "score_error"),
+    ("candidates' predicted spread (m)", "predicted_spread"),
+    ("pillar share of the collisions", "pillar_share"),
+)
+
+
+def _diagnostics(out: Path) -> dict[str, dict[str, Any]]:
+    """Every measured model's diagnostics (OUT/agreement.json), with its pillar share of collisions."""
+    measured = read_json(out / "agreement.json") if (out / "agreement.json").is_file() else {}
+    for m in measured.values():
+        m["pillar_share"] = m["collisions_with_pillar"] / m["collisions"] if m["collisions"] else None
+    return measured
+
+
+def predicts(out: Path) -> str:
+    """Markdown: how well each diagnostic predicts a model's distance to the first collision, across
+    every model measured in OUT (each model-seed one point): Spearman's rank correlation."""
+    measured = _diagnostics(out)
+    lines = ["| diagnostic | models | Spearman ρ with distance to first collision | p |", "|---|---|---|---|"]
+    for label, key in DIAGNOSTICS:
+        pairs = [(m[key], m["distance_to_collision_mean"])
+                 for m in measured.values() if m.get(key) is not None]
+        if len(pairs) < 3:
+            lines.append(f"| {label} | {len(pairs)} | – | – |")
+            continue
+        rho, p = spearmanr(*zip(*pairs, strict=True))
+        lines.append(f"| {label} | {len(pairs)} | {rho:+.2f} | {p:.3f} |")
+    return "\n".join(lines)
+
+
+def plot_predicts(out: Path, path: Path) -> None:
+    """Each diagnostic against distance to the first collision, one point per measured model."""
+    measured = _diagnostics(out)
+    fig, axes = plt.subplots(2, 4, figsize=(15, 6.5), sharey=True)
+    for ax, (label, key) in zip(axes.flat, DIAGNOSTICS, strict=False):
+        for name, m in measured.items():
+            if m.get(key) is None:
+                continue
+            net = "coll" if name.startswith("coll") else "depth"
+            ax.scatter(m[key], m["distance_to_collision_mean"], c="tab:red" if net == "coll" else "tab:blue",
+                       marker="s" if "head_form" not in name and net == "depth" else "o")
+        ax.set_xlabel(label, fontsize=9)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("to first collision (m)")
+    axes.flat[-1].axis("off")
+    axes.flat[-1].legend(handles=[
+        plt.Line2D([], [], ls="", marker="o", c="tab:red", label="Coll-Q-Net"),
+        plt.Line2D([], [], ls="", marker="o", c="tab:blue", label="Depth-Q-Net candidates"),
+        plt.Line2D([], [], ls="", marker="s", c="tab:blue", label="Depth-Q-Net, depth-first head"),
+    ], loc="center")
+    fig.suptitle("The on-policy diagnostic against driving, one point per model (hard val canyons)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+ROOM_BANDS = (0.0, 0.3, 0.6, 1.0, np.inf)  # the best action's nearest bin one frame ahead (m)
+MISTAKES = ("turned the wrong way", "straight where the oracle turned",
+            "turned where the oracle went straight")
+
+
+def _band_labels() -> list[str]:
+    return [f"{lo:g}–{hi:g} m" if np.isfinite(hi) else f"≥ {lo:g} m" for lo, hi in pairwise(ROOM_BANDS)]
+
+
+def _steps(out: Path, name: str) -> dict[str, np.ndarray] | None:
+    path = agreement_file(out / "probe", name, Oracle(), ".npz")
+    return dict(np.load(path)) if path.is_file() else None
+
+
+def where_it_fails(out: Path) -> dict[str, dict[str, Any]]:
+    """Per measured model, from its per-step arrays (OUT/probe/agreement): agreement on decisive steps
+    by the room the best action leaves (which states), what its disagreements are (which actions),
+    and a depth model's error per bin of the next frame's depth (which bins)."""
+    results = {}
+    for name, m in _diagnostics(out).items():
+        if (a := _steps(out, name)) is None:
+            continue
+        decisive = a["decisive"]
+        room = a["scores"].max(axis=1)
+        bands = [decisive & (room >= lo) & (room < hi) for lo, hi in pairwise(ROOM_BANDS)]
+        taken = np.array(ACTIONS)[np.abs(a["policy"][:, None] - np.array(ACTIONS)).argmin(1)]
+        wrong = decisive & ~a["agrees"]
+        turned = a["oracle"] != 0
+        kinds = [wrong & turned & (taken == -a["oracle"]), wrong & turned & (taken == 0), wrong & ~turned]
+        result = {
+            "distance": m["distance_to_collision_mean"],
+            "agree_by_room": [float(a["agrees"][b].mean()) if b.any() else None for b in bands],
+            "steps_by_room": [int(b.sum()) for b in bands],
+            "mistakes": [float(k.sum() / max(wrong.sum(), 1)) for k in kinds],
+        }
+        if "predicted" in a and a["predicted"].ndim == 3:  # a one-step depth model's bins per action
+            truth = a["true_bins"][:, :, 0, :]
+            valid = truth > 0
+            error = np.where(valid, np.abs(a["predicted"] - truth), 0).sum((0, 1)) / valid.sum((0, 1))
+            result["bin_error"] = error.tolist()
+        results[name] = result
+    return results
+
+
+def where(out: Path) -> str:
+    """Markdown: `where_it_fails` per model, with its distance to the first collision."""
+    bands = _band_labels()
+    lines = ["| model | to first collision (m) | " + " | ".join(f"agrees, room {b}" for b in bands)
+             + " | " + " | ".join(MISTAKES) + " | bin error, edges / centre (m) |",
+             "|---|---|" + "---|" * (len(bands) + len(MISTAKES) + 1)]
+    for name, r in where_it_fails(out).items():
+        agree = [f"{v:.0%} ({n})" if v is not None else "–"
+                 for v, n in zip(r["agree_by_room"], r["steps_by_room"], strict=True)]
+        bins = np.array(r.get("bin_error", []))
+        error = f"{bins[[0, 1, 24, 25]].mean():.2f} / {bins[11:15].mean():.2f}" if bins.size else "–"
+        lines.append(f"| `{name}` | {r['distance']:.2f} | " + " | ".join(agree) + " | "
+                     + " | ".join(f"{v:.0%}" for v in r["mistakes"]) + f" | {error} |")
+    return "\n".join(lines)
+
+
+def plot_where(out: Path, path: Path) -> None:
+    """Three panels over the measured models: the next frame's depth error per bin (depth models),
+    agreement on decisive steps by the room the best action leaves, and the kinds of disagreement."""
+    results = where_it_fails(out)
+    fig, (bins_ax, room_ax, kind_ax) = plt.subplots(1, 3, figsize=(17, 5))
+    order = sorted(results, key=lambda n: results[n]["distance"])
+    colors = plt.cm.viridis(np.linspace(0, 1, max(len(order), 2)))
+    for color, name in zip(colors, order, strict=False):
+        r = results[name]
+        label = f"{name} ({r['distance']:.1f} m)"
+        if "bin_error" in r:
+            bins_ax.plot(r["bin_error"], color=color, label=label)
+        room_ax.plot(range(len(r["agree_by_room"])),
+                     [np.nan if v is None else v for v in r["agree_by_room"]], "o-", color=color, label=label)
+    bins_ax.set(xlabel="bin (0: left edge, +51°; 25: right edge, −52°)",
+                ylabel="|predicted − true| next frame (m)", title="which bins: the next frame's depth error")
+    room_ax.set(xticks=range(len(ROOM_BANDS) - 1), ylabel="agrees with the one-step oracle, decisive steps",
+                title="which states: by the room the best action leaves")
+    room_ax.set_xticklabels(_band_labels())
+    bottom = np.zeros(len(order))
+    for kind, share in zip(MISTAKES, np.array([results[n]["mistakes"] for n in order]).T, strict=True):
+        kind_ax.barh(range(len(order)), share, left=bottom, label=kind)
+        bottom += share
+    kind_ax.set(yticks=range(len(order)), xlabel="share of the disagreements on decisive steps",
+                title="which actions: how it disagrees")
+    kind_ax.set_yticklabels([f"{n} ({results[n]['distance']:.1f} m)" for n in order], fontsize=7)
+    kind_ax.legend(fontsize=7, loc="lower right")
+    room_ax.legend(fontsize=6)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def compare(named: list[tuple[str, Path]]) -> str:
@@ -238,13 +399,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("action", choices=("run", "table", "compare", "paired"))
+    parser.add_argument("action", choices=("run", "table", "predicts", "where", "compare", "paired"))
     parser.add_argument("out", help="the sweep folder the candidates share (paired: any sweep folder of "
                                     "both networks); compare: NAME=EVAL,NAME=EVAL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     parser.add_argument("--pattern", default=PATTERN,
                         help="paired: a model's evaluation folder under OUT, from {net}, {n} and {seed}")
+    parser.add_argument("--figure", type=Path,
+                        help="predicts, where: the figure (default OUT/diagnostics.png, OUT/where.png)")
     parser.add_argument("--claim", help="paired: write the comparison as evidence of this claim of the "
                                         "findings file (e.g. table-i), one entry per size")
     parser.add_argument("--findings", type=Path, default=FINDINGS, help="paired --claim: the findings file")
@@ -269,6 +432,14 @@ def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
         return 0
     if args.action == "run":
         return run(args.out, setup)
+    if args.action == "where":
+        print(where(args.out))
+        plot_where(args.out, args.figure or args.out / "where.png")
+        return 0
+    if args.action == "predicts":
+        print(predicts(args.out))
+        plot_predicts(args.out, args.figure or args.out / "diagnostics.png")
+        return 0
     print(table(args.out, setup))
     return 0
 

@@ -1,1 +1,2 @@
-"""Reproduction of the paper's results: the pipeline, its tables, figures and HTML report."""
+"""The rendering of a sweep folder: the paper's tables, figures, the findings (claims, deviations)
+and the self-contained HTML report; `reproduce` runs the pipeline and then renders it."""

@@ -9,10 +9,11 @@ from depthq.configio import atomic_write_bytes, provenance, read_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import dataset_stats
+from depthq.pipeline.stages import best_depth_eval
+from depthq.pipeline.sweep import Sweep
 from depthq.report import html as page
 from depthq.report.figures import plot_fig5, plot_success_vs_runs
 from depthq.report.findings import FINDINGS, read_findings
-from depthq.report.sweep import Sweep
 from depthq.report.tables import (
     csv_text,
     markdown,
@@ -30,18 +31,6 @@ SUCCESS_TEXT = {
     "'closest': the smallest LiDAR-axis "
     "distance to a wall or pillar (docs/hard_canyons.md)",
 }
-
-
-def best_depth_eval(out: Path, sweep: Sweep) -> Path | None:
-    """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4 and its video)."""
-    best, best_distance = None, -1.0
-    for model in sweep.models():
-        path = out / "eval" / model.name / "summary.json"
-        if model.net != "depth" or not path.is_file():
-            continue
-        if (distance := read_json(path)["summary"]["distance_mean"]) > best_distance:
-            best, best_distance = path.parent, distance
-    return best
 
 
 def _trunks(out: Path) -> list[str]:

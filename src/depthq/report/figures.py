@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.report.sweep import Sweep, variant_label
+from depthq.pipeline.sweep import Sweep, variant_label
 from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results, interval, per_seed
 
 

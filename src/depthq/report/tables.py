@@ -12,7 +12,7 @@ from scipy.stats import t as student_t
 
 from depthq.configio import read_json
 from depthq.data.stats import PAPER_TABLE2
-from depthq.report.sweep import Model, Sweep, Variant, variant_label
+from depthq.pipeline.sweep import Model, Sweep, Variant, variant_label
 from depthq.sim.canyon import FAMILIES, split_family
 
 NET_LABELS = {"coll": "CQN", "depth": "DQN"}

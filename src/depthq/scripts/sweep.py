@@ -51,10 +51,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # MuJoCo and torch (report.sweep reads sim.world's decision rate): when this verb runs.
-    from depthq.report.presets import get_preset
+    # MuJoCo and torch (pipeline.sweep reads sim.world's decision rate): when this verb runs.
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_ints, parse_setting, retarget, widened
     from depthq.report.reproduce import run_sweep
-    from depthq.report.sweep import parse_ints, parse_setting, retarget, widened
 
     base = get_preset(args.preset)
     given = vars(args)

@@ -1,6 +1,6 @@
 """A sweep: one dataset, then every (network, training runs, seed, variant) model trained and evaluated.
 
-The presets (`depthq.report.presets`) are sweeps; `depthq sweep` widens one: more seeds (`--seeds
+The presets (`depthq.pipeline.presets`) are sweeps; `depthq sweep` widens one: more seeds (`--seeds
 0-9`), other sizes, one network, or a grid of training settings (`--set dropout=0,0.5`), each value
 a *variant* whose models are named after it (`depth_n200_s0_dropout0.5`). A sweep's *setup* (the
 dataset, the evaluation canyons, the training budget) is what its folder's results depend on; the
@@ -19,7 +19,7 @@ from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path
-from depthq.report.layout import FOLDER_KEYS, NETS, model_name, setting_text
+from depthq.pipeline.layout import FOLDER_KEYS, NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig

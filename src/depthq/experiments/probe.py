@@ -1,4 +1,5 @@
-"""The fidelity probe: how close our exploration data and our world are to the original's, fast.
+"""The fidelity probe (`depthq probe`): how close our exploration data and our world are to the
+original's, fast. A calibration experiment, the one with a verb of its own.
 
 Three parts, each on the `train` and `val` canyon streams only (the `eval` canyons are the test set):
 
@@ -131,13 +132,19 @@ def probe(
     return result
 
 
+def agreement_file(out: Path, evaluation: str, oracle: Oracle, suffix: str) -> Path:
+    """OUT/agreement/<evaluation>_<oracle><suffix>: an evaluation's per-step arrays (.npz) or figure
+    (.png). Evaluation names hold dots (bootstrap0.5): the suffix is appended, never swapped in."""
+    return out / "agreement" / f"{evaluation}_{str(oracle).replace(':', '-')}{suffix}"
+
+
 def measure_agreement(folder: Path, oracle: Oracle, out: Path, predictions: bool = False) -> dict[str, Any]:
     """`agreement` of one evaluation; its per-step arrays and figure go to OUT/agreement/<name>_<oracle>."""
     summary, arrays = agreement(folder, oracle, predictions)
-    stem = out / "agreement" / f"{Path(folder).name}_{str(oracle).replace(':', '-')}"
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(stem.with_suffix(".npz"), **arrays)
-    plot_agreement(arrays, summary, stem.with_suffix(".png"))
+    arrays_path = agreement_file(out, Path(folder).name, oracle, ".npz")
+    arrays_path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(arrays_path, **arrays)
+    plot_agreement(arrays, summary, agreement_file(out, Path(folder).name, oracle, ".png"))
     return summary
 
 

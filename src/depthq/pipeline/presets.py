@@ -8,7 +8,7 @@ from dataclasses import replace
 from depthq.data.recorder import CollectConfig
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
-from depthq.report.sweep import Sweep, retarget
+from depthq.pipeline.sweep import Sweep, retarget
 from depthq.sim.world import NOMINAL_DECISION_HZ
 
 PRESETS: dict[str, Sweep] = {
