@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from depthq.cli import main
-from depthq.control.action_selection import Selection
+from depthq.control.action_selection import ACTIONS, Selection
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, OracleWorld, agreement, drive_oracle, env_config
@@ -111,3 +111,11 @@ def test_a_checkpoints_values_are_re_predicted_along_its_runs(
     assert arrays["true_bins"].shape == (steps, 3, 1, 26)
     assert 0 <= summary["same_decision_new_noise"] <= 1 and summary["score_error"] > 0
     assert summary["true_spread"] >= 0 and summary["predicted_spread"] >= 0
+    # A Coll-Q-Net's decision is its lowest collision probability, and its values are no depth scores.
+    folder = train(TrainConfig(model="coll", data=str(small_dataset), **fast), tmp_path / "cqn",
+                   progress=False)
+    evaluate(str(folder), tmp_path / "eval_coll", config, workers=1, progress=False, video=False)
+    summary, arrays = agreement(tmp_path / "eval_coll", Oracle(), predictions=True)
+    lowest = np.array(ACTIONS)[arrays["predicted_scores"].argmin(1)]
+    assert summary["same_decision_new_noise"] == pytest.approx(float((lowest == arrays["policy"]).mean()))
+    assert "score_error" not in summary

@@ -263,7 +263,8 @@ def agreement(
     def share(mask: np.ndarray) -> float | None:
         return float(agrees[mask].mean()) if mask.any() else None
 
-    return {**_prediction_summary(arrays, oracle, late), **{
+    depth_policy = policy is not None and policy.kind == "depth"
+    return {**_prediction_summary(arrays, oracle, late, depth_policy), **{
         "evaluation": str(folder),
         "policy": summary["policy"].get("policy"),
         "oracle": str(oracle),
@@ -282,7 +283,9 @@ def agreement(
     }}, arrays
 
 
-def _prediction_summary(arrays: dict[str, np.ndarray], oracle: Oracle, late: np.ndarray) -> dict[str, Any]:
+def _prediction_summary(
+    arrays: dict[str, np.ndarray], oracle: Oracle, late: np.ndarray, depth_policy: bool
+) -> dict[str, Any]:
     """What the re-predicted values say, where they exist and are the oracle's kind of score (a depth
     policy against a depth oracle of its lookahead): how far each candidate's predicted score is from
     the true one, how far apart the candidates are in truth and in prediction (the action's effect),
@@ -290,9 +293,10 @@ def _prediction_summary(arrays: dict[str, np.ndarray], oracle: Oracle, late: np.
     if "predicted_scores" not in arrays:
         return {}
     predicted, recorded = arrays["predicted_scores"], arrays["policy"]
-    choice = np.array(ACTIONS)[predicted.argmax(1) if oracle.signal == "depth" else predicted.argmin(1)]
+    # The policy's own rule picks: a Depth-Q-Net the highest score, a Coll-Q-Net the lowest probability.
+    choice = np.array(ACTIONS)[predicted.argmax(1) if depth_policy else predicted.argmin(1)]
     out: dict[str, Any] = {"same_decision_new_noise": float((choice == recorded).mean())}
-    if oracle.signal == "depth" and predicted.shape == arrays["scores"].shape:
+    if depth_policy and oracle.signal == "depth" and predicted.shape == arrays["scores"].shape:
         error, truth = np.abs(predicted - arrays["scores"]), arrays["scores"]
         for name, mask in (("", np.ones_like(late)), ("_before_collision", late)):
             if mask.any():
