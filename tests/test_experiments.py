@@ -61,6 +61,9 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert set(failing) == set(names) and all(len(r["bin_error"]) == 26 for r in failing.values())
     assert all(abs(sum(r["mistakes"]) - 1) < 1e-9 or sum(r["mistakes"]) == 0 for r in failing.values())
     assert oracle_gap.where(out).count("| `depth_n6_s0") == 2
+    for name, r in failing.items():  # bins 0 along its runs include those 0 on every training frame
+        dead = oracle_gap.dead_bins(out / "models" / name, frames=50)
+        assert all(0 <= b < 26 for b in dead) and set(r["dead_bins"]) <= set(range(26))
     oracle_gap.plot_where(out, out / "where.png")
     assert (out / "where.png").stat().st_size > 5000
     stamp = (out / "agreement.json").stat().st_mtime_ns

@@ -5,15 +5,18 @@ along its own runs.
     python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500]
     python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500]
     python -m depthq.experiments.oracle_gap predicts OUT [--figure PATH]
+    python -m depthq.experiments.oracle_gap where OUT [--figure PATH]
+    python -m depthq.experiments.oracle_gap dead MODEL[,MODEL…]
     python -m depthq.experiments.oracle_gap paired SWEEP [--seeds 0,1,2] [--sizes 200,500]
 
 `run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
 measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
 measured once); `table` prints the Markdown table of what has finished; `predicts` how well each of
-the diagnostic's measures predicts driving across all of them (and a figure). The `eval` canyons are
-never driven here. `paired` reads any sweep folder of both networks (e.g. a preset's Table I in the `eval`
-canyons) and compares them seed by seed; with `--claim ID` it writes that as the claim's evidence in
-docs/findings.json.
+the diagnostic's measures predicts driving across all of them, `where` which states, actions and
+bins each model gets wrong (each with a figure); `dead` which bins a checkpoint predicts as 0 always.
+The `eval` canyons are never driven here. `paired` reads any sweep folder of both networks (e.g. a
+preset's Table I in the `eval` canyons) and compares them seed by seed; with `--claim ID` it writes
+that as the claim's evidence in docs/findings.json.
 """
 
 from __future__ import annotations
@@ -31,18 +34,22 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+import torch
 from scipy.stats import spearmanr
 
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
+from depthq.data.manifest import Dataset
 from depthq.evaluate.oracle import Oracle
 from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
 from depthq.experiments.probe import agreement_file, measure_agreement
+from depthq.nets.checkpoint import load_qnet
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import Sweep, parse_ints, parse_setting, retarget, widened
 from depthq.report.findings import FINDINGS, Evidence, record_evidence
 from depthq.report.reproduce import run_sweep
+from depthq.train.features import load_features
 
 
 @dataclass(frozen=True)
@@ -279,6 +286,8 @@ def where_it_fails(out: Path) -> dict[str, dict[str, Any]]:
             valid = truth > 0
             error = np.where(valid, np.abs(a["predicted"] - truth), 0).sum((0, 1)) / valid.sum((0, 1))
             result["bin_error"] = error.tolist()
+            # A bin predicted 0 is no reading to the policy (ignored): one 0 at every step is blind.
+            result["dead_bins"] = np.where((a["predicted"] <= 0).all(axis=(0, 1)))[0].tolist()
         results[name] = result
     return results
 
@@ -287,50 +296,74 @@ def where(out: Path) -> str:
     """Markdown: `where_it_fails` per model, with its distance to the first collision."""
     bands = _band_labels()
     lines = ["| model | to first collision (m) | " + " | ".join(f"agrees, room {b}" for b in bands)
-             + " | " + " | ".join(MISTAKES) + " | bin error, edges / centre (m) |",
-             "|---|---|" + "---|" * (len(bands) + len(MISTAKES) + 1)]
+             + " | " + " | ".join(MISTAKES) + " | bin error, edges / centre (m) | bins always 0 |",
+             "|---|---|" + "---|" * (len(bands) + len(MISTAKES) + 2)]
     for name, r in where_it_fails(out).items():
         agree = [f"{v:.0%} ({n})" if v is not None else "–"
                  for v, n in zip(r["agree_by_room"], r["steps_by_room"], strict=True)]
         bins = np.array(r.get("bin_error", []))
         error = f"{bins[[0, 1, 24, 25]].mean():.2f} / {bins[11:15].mean():.2f}" if bins.size else "–"
         lines.append(f"| `{name}` | {r['distance']:.2f} | " + " | ".join(agree) + " | "
-                     + " | ".join(f"{v:.0%}" for v in r["mistakes"]) + f" | {error} |")
+                     + " | ".join(f"{v:.0%}" for v in r["mistakes"]) + f" | {error} | "
+                     + (", ".join(map(str, r["dead_bins"])) or "none" if "dead_bins" in r else "–") + " |")
     return "\n".join(lines)
+
+
+def _short(name: str) -> str:
+    """A figure's name of a model: depth_n500_s0_head_formconcat_mirrorTrue → DQN concat mirrorTrue."""
+    net, _, rest = name.partition("_")
+    rest = "_".join(p for p in rest.split("_") if not (p[:1] in "ns" and p[1:].isdigit()))
+    head = "depth-first" if net == "depth" and "head_form" not in rest else ""
+    rest = rest.replace("head_form", "").replace("_", " ")
+    return " ".join(filter(None, ("DQN" if net == "depth" else "CQN", head, rest)))
 
 
 def plot_where(out: Path, path: Path) -> None:
     """Three panels over the measured models: the next frame's depth error per bin (depth models),
     agreement on decisive steps by the room the best action leaves, and the kinds of disagreement."""
     results = where_it_fails(out)
-    fig, (bins_ax, room_ax, kind_ax) = plt.subplots(1, 3, figsize=(17, 5))
     order = sorted(results, key=lambda n: results[n]["distance"])
-    colors = plt.cm.viridis(np.linspace(0, 1, max(len(order), 2)))
-    for color, name in zip(colors, order, strict=False):
-        r = results[name]
-        label = f"{name} ({r['distance']:.1f} m)"
+    colors = dict(zip(order, plt.cm.viridis(np.linspace(0, 0.95, max(len(order), 2))), strict=False))
+    fig = plt.figure(figsize=(16, 10))
+    grid = fig.add_gridspec(2, 2, width_ratios=(1, 1))
+    bins_ax, room_ax = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[0, 1])
+    kind_ax = fig.add_subplot(grid[1, :])
+    for name in order:
+        r, label = results[name], f"{_short(name)} ({results[name]['distance']:.1f} m)"
         if "bin_error" in r:
-            bins_ax.plot(r["bin_error"], color=color, label=label)
-        room_ax.plot(range(len(r["agree_by_room"])),
-                     [np.nan if v is None else v for v in r["agree_by_room"]], "o-", color=color, label=label)
+            bins_ax.plot(r["bin_error"], color=colors[name], label=label)
+        room_ax.plot(range(len(r["agree_by_room"])), [np.nan if v is None else v for v in r["agree_by_room"]],
+                     "o-", color=colors[name], label=label)
     bins_ax.set(xlabel="bin (0: left edge, +51°; 25: right edge, −52°)",
                 ylabel="|predicted − true| next frame (m)", title="which bins: the next frame's depth error")
     room_ax.set(xticks=range(len(ROOM_BANDS) - 1), ylabel="agrees with the one-step oracle, decisive steps",
                 title="which states: by the room the best action leaves")
     room_ax.set_xticklabels(_band_labels())
+    room_ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     bottom = np.zeros(len(order))
     for kind, share in zip(MISTAKES, np.array([results[n]["mistakes"] for n in order]).T, strict=True):
         kind_ax.barh(range(len(order)), share, left=bottom, label=kind)
         bottom += share
     kind_ax.set(yticks=range(len(order)), xlabel="share of the disagreements on decisive steps",
-                title="which actions: how it disagrees")
-    kind_ax.set_yticklabels([f"{n} ({results[n]['distance']:.1f} m)" for n in order], fontsize=7)
-    kind_ax.legend(fontsize=7, loc="lower right")
-    room_ax.legend(fontsize=6)
+                title="which actions: how it disagrees with the one-step oracle (models by distance)")
+    kind_ax.set_yticklabels([f"{_short(n)} ({results[n]['distance']:.1f} m)" for n in order], fontsize=8)
+    kind_ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def dead_bins(folder: Path, frames: int = 3000) -> list[int]:
+    """The bins a one-step Depth-Q-Net checkpoint predicts as 0 for every candidate action on the
+    first `frames` frames of its own dataset's feature cache: bins its policy never sees (a 0 is no
+    reading), whatever the frame."""
+    net, record = load_qnet(Path(folder))
+    table = load_features(Dataset.open(record["train"]["data"]), record["trunk"], record["input_size"],
+                          progress=False)
+    features = torch.from_numpy(np.asarray(table.features[:frames], dtype=np.float32))
+    values = net.candidate_outputs(features, torch.tensor(ACTIONS)).numpy()  # (frames, N, bins)
+    return np.where((values <= 0).all(axis=(0, 1)))[0].tolist()
 
 
 def compare(named: list[tuple[str, Path]]) -> str:
@@ -399,9 +432,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("action", choices=("run", "table", "predicts", "where", "compare", "paired"))
+    parser.add_argument("action", choices=("run", "table", "predicts", "where", "dead", "compare", "paired"))
     parser.add_argument("out", help="the sweep folder the candidates share (paired: any sweep folder of "
-                                    "both networks); compare: NAME=EVAL,NAME=EVAL,…")
+                                    "both networks); compare: NAME=EVAL,NAME=EVAL,…; dead: MODEL,MODEL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     parser.add_argument("--pattern", default=PATTERN,
@@ -416,6 +449,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
+    if args.action == "dead":
+        for folder in args.out.split(","):
+            print(f"{folder}: bins predicted 0 for every action on 3000 frames: {dead_bins(Path(folder))}")
+        return 0
     if args.action == "compare":
         pairs = [item.partition("=") for item in args.out.split(",")]
         print(compare([(name, Path(folder)) for name, _, folder in pairs]))
