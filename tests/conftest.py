@@ -28,7 +28,7 @@ def small_dataset(tmp_path_factory):
     from depthq.data.recorder import CollectConfig, collect
 
     root = tmp_path_factory.mktemp("small") / "data"
-    collect(root, CollectConfig(runs=6, val_runs=2, max_steps=60), seed=0, workers=1, progress=False)
+    collect(root, CollectConfig(runs=6, val_runs=2, max_steps=60), workers=1, progress=False)
     return root
 
 
@@ -41,7 +41,7 @@ def small_hard_dataset(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("small_hard") / "data"
     config = CollectConfig(runs=3, val_runs=1, max_steps=40, env=exploration_env(family="hard"))
-    collect(root, config, seed=0, workers=1, progress=False)
+    collect(root, config, workers=1, progress=False)
     return root
 
 
@@ -67,7 +67,7 @@ def reference_collection(tmp_path_factory):
     from depthq.data.recorder import CollectConfig, collect
 
     root = tmp_path_factory.mktemp("reference") / "ds"
-    return collect(root, CollectConfig(runs=4, val_runs=1, max_steps=40), seed=3, workers=1, progress=False)
+    return collect(root, CollectConfig(runs=4, val_runs=1, max_steps=40, seed=3), workers=1, progress=False)
 
 
 OU_CANYONS = ("val:1000", "val:1001", "val:1002")

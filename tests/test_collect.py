@@ -20,7 +20,7 @@ from depthq.errors import ConfigError
 from depthq.sim.world import TURTLEBOT3_MAX_YAW_RATE
 
 ARGS = ["--runs", "4", "--val-runs", "1", "--max-steps", "40", "--seed", "3"]
-CONFIG = CollectConfig(runs=4, val_runs=1, max_steps=40)
+CONFIG = CollectConfig(runs=4, val_runs=1, max_steps=40, seed=3)  # the reference collection's
 
 
 @pytest.fixture
@@ -28,7 +28,8 @@ def reference(reference_collection: Dataset) -> Dataset:
     """An uninterrupted single-process collection (conftest's, shared with the Ray test). Not the small
     dataset: it is the collection under test, with the config and seed of `ARGS` that the CLI
     collections repeat."""
-    assert reference_collection.config == to_dict(CONFIG) and reference_collection.seed == 3
+    assert reference_collection.config == CONFIG.recorded() and reference_collection.seed == 3
+    assert "seed" not in reference_collection.config and "seed" in to_dict(CONFIG)  # the manifest as before
     return reference_collection
 
 
@@ -103,12 +104,12 @@ def test_interrupted_collection_resumes_to_identical_arrays(reference, tmp_path)
 
 def test_collecting_into_a_folder_with_another_config_refuses(reference):
     with pytest.raises(ConfigError, match="runs"):
-        collect(reference.root, CollectConfig(runs=5, val_runs=1, max_steps=40), seed=3, progress=False)
+        collect(reference.root, CollectConfig(runs=5, val_runs=1, max_steps=40, seed=3), progress=False)
 
 
 def test_a_run_does_not_depend_on_how_many_are_collected(reference, tmp_path):
     """Why `depthq sweep --runs 500` trains the models a 900-run dataset would: run i is the same."""
-    fewer = collect(tmp_path / "ds", replace(CONFIG, runs=2), seed=3, workers=1, progress=False)
+    fewer = collect(tmp_path / "ds", replace(CONFIG, runs=2), workers=1, progress=False)
     assert len(fewer.entries("train")) >= 2 and len(fewer.entries()) < len(reference.entries())
     assert [e.sha256 for e in fewer.entries()] == [reference.entry(e.split, e.index).sha256
                                                   for e in fewer.entries()]
@@ -122,7 +123,7 @@ def test_cli_rejects_bad_values(tmp_path, capsys):
 
 def test_resume_is_a_no_op_when_complete(reference):
     before = {p: p.stat().st_mtime_ns for p in Path(reference.root).rglob("*.h5")}
-    collect(reference.root, CONFIG, seed=3, workers=1, progress=False)
+    collect(reference.root, CONFIG, workers=1, progress=False)
     assert {p: p.stat().st_mtime_ns for p in Path(reference.root).rglob("*.h5")} == before
 
 

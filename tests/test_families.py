@@ -135,7 +135,7 @@ def test_collect_in_the_hard_family_records_it(tmp_path):
     from depthq.data.recorder import CollectConfig, collect, exploration_env
 
     config = CollectConfig(runs=1, val_runs=0, max_steps=28, env=exploration_env(family="hard"))
-    collect(tmp_path / "d", config, seed=0, progress=False)
+    collect(tmp_path / "d", config, progress=False)
     dataset = Dataset.open(tmp_path / "d")
     assert dataset.config["env"]["world"]["family"] == "hard"
     entry = dataset.entries()[0]
@@ -176,7 +176,7 @@ def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_pat
     from depthq.train.trainer import train
 
     config = CollectConfig(runs=2, val_runs=1, max_steps=60, env=exploration_env(family="hard"))
-    collect(tmp_path / "d", config, seed=0, progress=False)
+    collect(tmp_path / "d", config, progress=False)
     settings = TrainConfig(model="depth", data=str(tmp_path / "d"), epochs=1, train_batches=1, val_batches=1)
     checkpoint = train(settings, tmp_path / "ckpt", progress=False)
     assert default_canyons(str(checkpoint)) == "hard/eval"

@@ -154,6 +154,7 @@ def test_the_old_verb_spellings_parse_to_the_same_config() -> None:
     assert collect(["--runs", "3", "--hz", "10", "--family", "hard"]) == expected
     assert collect(["--runs", "3", "--env.world.decision-hz", "10", "--env.world.family", "hard"]) == expected
     assert collect([]) == CollectConfig()
+    assert collect(["--seed", "3"]) == CollectConfig(seed=3)  # the collection seed: a config field now
     for verb, argv in (("evaluate", ["heuristic", "--out", "o"]), ("drive", ["--out", "o"])):
         old = build_parser(verb).parse_args([verb, *argv, "--hz", "10", "--time-limit", "5",
                                              "--which", "last"])

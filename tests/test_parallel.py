@@ -9,7 +9,6 @@ import pytest
 from conftest import without_timing
 
 from depthq.cli import main
-from depthq.configio import to_dict
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect
 from depthq.errors import ConfigError
@@ -39,9 +38,9 @@ def test_ray_gives_the_local_results(
     assert without_timing(remote["runs"]) == without_timing(local["runs"])
     assert [r["canyon"] for r in remote["runs"]] == list(config.canyons)
 
-    data = CollectConfig(runs=4, val_runs=1, max_steps=40)
-    assert reference_collection.config == to_dict(data)
-    collect(tmp_path / "d_ray", data, seed=reference_collection.seed, workers=2, progress=False,
+    data = CollectConfig(runs=4, val_runs=1, max_steps=40, seed=reference_collection.seed)
+    assert reference_collection.config == data.recorded()
+    collect(tmp_path / "d_ray", data, workers=2, progress=False,
             executor=on_ray)
     manifest = "manifest.json"
     assert (tmp_path / "d_ray" / manifest).read_bytes() == (reference_collection.root / manifest).read_bytes()

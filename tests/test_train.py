@@ -279,7 +279,7 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
         CollectConfig(max_steps=25)
     no_bumps = tmp_path / "no_bumps"  # seed 0, 2.9 s at 10 Hz: no run lasts long enough to bump
     config = CollectConfig(runs=2, val_runs=1, max_steps=29, env=exploration_env(10.0))
-    collect(no_bumps, config, seed=0, workers=1, progress=False)
+    collect(no_bumps, config, workers=1, progress=False)
     with pytest.raises(ConfigError, match="no run ended in a bump"):
         train(_config(no_bumps, model="coll", samples=SampleConfig(every_run_end=False)), tmp_path / "coll",
               progress=False)

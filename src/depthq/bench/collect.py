@@ -16,7 +16,7 @@ def bench_collect(runs: int = 20, workers: tuple[int, ...] = (1, 2)) -> dict:
         with tempfile.TemporaryDirectory() as tmp:
             start = time.perf_counter()
             dataset = collect(
-                Path(tmp) / "ds", CollectConfig(runs=runs, val_runs=0), seed=0, workers=w, progress=False
+                Path(tmp) / "ds", CollectConfig(runs=runs, val_runs=0), workers=w, progress=False
             )
             seconds = time.perf_counter() - start
             frames = sum(e.n_frames for e in dataset.entries())

@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -60,6 +61,9 @@ class CollectConfig:
     env: EnvConfig = field(default_factory=exploration_env)  # the robot's commands unclipped, 50 s runs
     ou: OUConfig = field(default_factory=OUConfig)  # the exploration policy
     data: DataConfig = field(default_factory=DataConfig)
+    # Which draw: run i of a split drives its canyon with sensor and OU noise seeded from (seed, split, i).
+    # The manifest records it beside the rest of the config (`recorded`), as it always has.
+    seed: int = 0
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -77,6 +81,11 @@ class CollectConfig:
                 f"at {self.env.world.decision_hz:g} Hz) keep at most {steps + 1 - self.skip_frames} frames "
                 f"after skipping {self.skip_frames}: none would reach min_frames = {self.data.min_frames}"
             )
+
+
+    def recorded(self) -> dict[str, Any]:
+        """The manifest's `config`: every field but the seed, which the manifest holds beside it."""
+        return {k: v for k, v in to_dict(self).items() if k != "seed"}
 
 
 def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:
@@ -155,7 +164,6 @@ class _CollectWorker:
 def collect(
     out: Path,
     config: CollectConfig,
-    seed: int,
     workers: int = 1,
     overwrite: bool = False,
     progress: bool = True,
@@ -169,7 +177,7 @@ def collect(
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     executor.check_shared(out)  # workers write the run files themselves
-    dataset = Dataset.create(Path(out).resolve(), to_dict(config), seed, overwrite=overwrite)
+    dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite)
     wanted = {"train": config.runs, "val": config.val_runs}
     bar = tqdm(
         total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True
@@ -179,7 +187,7 @@ def collect(
         while todo := _missing(dataset, wanted, config.data.min_frames):
             bar.n = sum(wanted.values()) - len(todo)
             bar.refresh()
-            for meta, info in _run_all(todo, config, seed, dataset, workers, executor):
+            for meta, info in _run_all(todo, config, config.seed, dataset, workers, executor):
                 dataset.add(meta, info)
                 steps += meta.n_frames
                 bar.update(1)
@@ -194,7 +202,7 @@ def collection_complete(out: Path, config: CollectConfig) -> bool:
     if not (Path(out) / "manifest.json").is_file():
         return False
     dataset = Dataset.open(Path(out))
-    if dataset.config != to_dict(config):
+    if dataset.config != config.recorded() or dataset.seed != config.seed:
         return False
     return not _missing(dataset, {"train": config.runs, "val": config.val_runs}, config.data.min_frames)
 

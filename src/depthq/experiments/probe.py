@@ -82,7 +82,7 @@ def small_dqn(
     """Collect `runs` OU runs at `decision_hz`, train a Depth-Q-Net on them, drive it in `canyons`."""
     data = out / "data"
     config = CollectConfig(runs=runs, val_runs=max(2, runs // 10), env=exploration_env(decision_hz))
-    collect(data, config, seed=0, workers=2)
+    collect(data, config, workers=2)
     ckpt = train(TrainConfig(model="depth", data=str(data), runs=runs, epochs=epochs), out / f"depth_n{runs}")
     summary = evaluate(str(ckpt), out / "eval", EvalConfig(canyons=parse_canyon_set(canyons)), video=False)
     return {**summary["summary"], "offline": summary.get("offline")}

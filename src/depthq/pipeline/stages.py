@@ -99,7 +99,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     stages = [
         Stage(
             partial(collection_complete, data, collect_config),
-            Job("collect", partial(collect, data, collect_config, 0, sweep.workers, executor=executor)),
+            Job("collect", partial(collect, data, collect_config, sweep.workers, executor=executor)),
         ),
         Stage(
             partial(_features_ready, data, collect_config, frozen),

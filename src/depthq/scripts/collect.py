@@ -18,9 +18,6 @@ _HELP = {"env.world.family": "docs/hard_canyons.md; its canyon generator and loo
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="parallel worker processes")
-    p.add_argument("--seed", type=int, default=0,
-                   help="collection seed: run i of a split drives its canyon with sensor and OU noise seeded "
-                   "from (seed, split, i), recorded in the manifest beside the config")
     p.add_argument("--out", type=Path, required=True, help="dataset folder (created, or resumed)")
     p.add_argument("--overwrite", action="store_true", help="replace a dataset made with another config")
     add_executor_arguments(p)
@@ -38,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(CollectConfig, args, base=CollectConfig(env=exploration_env(family=family)))
     start = time.perf_counter()
     executor = executor_from(args)
-    dataset = collect(args.out, config, args.seed, args.workers, args.overwrite, executor=executor)
+    dataset = collect(args.out, config, args.workers, args.overwrite, executor=executor)
     elapsed = time.perf_counter() - start
     size = sum(p.stat().st_size for p in (args.out / "runs").glob("*.h5"))
     frames = sum(e.n_frames for e in dataset.entries())
