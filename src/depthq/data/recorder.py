@@ -82,7 +82,6 @@ class CollectConfig:
                 f"after skipping {self.skip_frames}: none would reach min_frames = {self.data.min_frames}"
             )
 
-
     def recorded(self) -> dict[str, Any]:
         """The manifest's `config`: every field but the seed, which the manifest holds beside it."""
         return {k: v for k, v in to_dict(self).items() if k != "seed"}

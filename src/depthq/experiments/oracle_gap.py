@@ -227,9 +227,9 @@ def plot_predicts(out: Path, path: Path) -> None:
         for name, m in measured.items():
             if m.get(key) is None:
                 continue
-            net = "coll" if name.startswith("coll") else "depth"
-            ax.scatter(m[key], m["distance_to_collision_mean"], c="tab:red" if net == "coll" else "tab:blue",
-                       marker="s" if "head_form" not in name and net == "depth" else "o")
+            ax.scatter(m[key], m["distance_to_collision_mean"],
+                       c="tab:red" if name.startswith("coll") else "tab:blue",
+                       marker="s" if _depth_first(name) else "o")
         ax.set_xlabel(label, fontsize=9)
     for ax in axes[:, 0]:
         ax.set_ylabel("to first collision (m)")
@@ -249,6 +249,12 @@ def plot_predicts(out: Path, path: Path) -> None:
 ROOM_BANDS = (0.0, 0.3, 0.6, 1.0, np.inf)  # the best action's nearest bin one frame ahead (m)
 MISTAKES = ("turned the wrong way", "straight where the oracle turned",
             "turned where the oracle went straight")
+
+
+def _always_zero(values: np.ndarray) -> list[int]:
+    """The bins of (rows, candidates, bins) values that are 0 in every row and for every candidate:
+    a bin predicted 0 is no reading to the policy, so one 0 everywhere is a direction it never sees."""
+    return np.where((values <= 0).all(axis=(0, 1)))[0].tolist()
 
 
 def _band_labels() -> list[str]:
@@ -286,8 +292,7 @@ def where_it_fails(out: Path) -> dict[str, dict[str, Any]]:
             valid = truth > 0
             error = np.where(valid, np.abs(a["predicted"] - truth), 0).sum((0, 1)) / valid.sum((0, 1))
             result["bin_error"] = error.tolist()
-            # A bin predicted 0 is no reading to the policy (ignored): one 0 at every step is blind.
-            result["dead_bins"] = np.where((a["predicted"] <= 0).all(axis=(0, 1)))[0].tolist()
+            result["dead_bins"] = _always_zero(a["predicted"])
         results[name] = result
     return results
 
@@ -309,11 +314,16 @@ def where(out: Path) -> str:
     return "\n".join(lines)
 
 
+def _depth_first(name: str) -> bool:
+    """Whether a model folder holds the default Depth-Q-Net head (its name sets no head_form)."""
+    return name.startswith("depth") and "head_form" not in name
+
+
 def _short(name: str) -> str:
     """A figure's name of a model: depth_n500_s0_head_formconcat_mirrorTrue → DQN concat mirrorTrue."""
     net, _, rest = name.partition("_")
     rest = "_".join(p for p in rest.split("_") if not (p[:1] in "ns" and p[1:].isdigit()))
-    head = "depth-first" if net == "depth" and "head_form" not in rest else ""
+    head = "depth-first" if _depth_first(name) else ""
     rest = rest.replace("head_form", "").replace("_", " ")
     return " ".join(filter(None, ("DQN" if net == "depth" else "CQN", head, rest)))
 
@@ -325,7 +335,7 @@ def plot_where(out: Path, path: Path) -> None:
     order = sorted(results, key=lambda n: results[n]["distance"])
     colors = dict(zip(order, plt.cm.viridis(np.linspace(0, 0.95, max(len(order), 2))), strict=False))
     fig = plt.figure(figsize=(16, 10))
-    grid = fig.add_gridspec(2, 2, width_ratios=(1, 1))
+    grid = fig.add_gridspec(2, 2)
     bins_ax, room_ax = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[0, 1])
     kind_ax = fig.add_subplot(grid[1, :])
     for name in order:
@@ -354,7 +364,10 @@ def plot_where(out: Path, path: Path) -> None:
     plt.close(fig)
 
 
-def dead_bins(folder: Path, frames: int = 3000) -> list[int]:
+DEAD_FRAMES = 3000  # training frames `dead` looks at
+
+
+def dead_bins(folder: Path, frames: int = DEAD_FRAMES) -> list[int]:
     """The bins a one-step Depth-Q-Net checkpoint predicts as 0 for every candidate action on the
     first `frames` frames of its own dataset's feature cache: bins its policy never sees (a 0 is no
     reading), whatever the frame."""
@@ -362,8 +375,7 @@ def dead_bins(folder: Path, frames: int = 3000) -> list[int]:
     table = load_features(Dataset.open(record["train"]["data"]), record["trunk"], record["input_size"],
                           progress=False)
     features = torch.from_numpy(np.asarray(table.features[:frames], dtype=np.float32))
-    values = net.candidate_outputs(features, torch.tensor(ACTIONS)).numpy()  # (frames, N, bins)
-    return np.where((values <= 0).all(axis=(0, 1)))[0].tolist()
+    return _always_zero(net.candidate_outputs(features, torch.tensor(ACTIONS)).numpy())
 
 
 def compare(named: list[tuple[str, Path]]) -> str:
@@ -395,6 +407,12 @@ def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
     return results
 
 
+def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[float], ...]:
+    """Coll-Q-Net's and Depth-Q-Net's `key` per seed, and their difference (Depth − Coll)."""
+    coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
+    return coll, depth, [d - c for c, d in zip(coll, depth, strict=True)]
+
+
 def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
     of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
@@ -404,9 +422,7 @@ def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern:
              "|---|---|---|---|---|---|"]
     for n, both in paired_results(sweep, sizes, seeds, pattern).items():
         for label, key, fmt in PAIRED:
-            coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
-            diff = [d - c for c, d in zip(coll, depth, strict=True)]
-            cells = [mean_interval(v, fmt) for v in (coll, depth, diff)]
+            cells = [mean_interval(v, fmt) for v in _columns(both, key)]
             lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -418,8 +434,7 @@ def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
     record = read_json(Path(sweep) / "reproduce.json")["sweep"]
     out = {}
     for n, both in paired_results(sweep, sizes, seeds, pattern).items():
-        coll, depth = ([float(s[i]["distance_to_collision_mean"]) for s in both.values()] for i in (0, 1))
-        diff = [d - c for c, d in zip(coll, depth, strict=True)]
+        coll, depth, diff = _columns(both, "distance_to_collision_mean")
         ahead = sum(d > 0 for d in diff)
         key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
         out[key] = (f"to the first collision Depth-Q-Net {mean_interval(depth, '.2f')} m, Coll-Q-Net "
@@ -451,7 +466,8 @@ def main(argv: list[str] | None = None) -> int:
 def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
     if args.action == "dead":
         for folder in args.out.split(","):
-            print(f"{folder}: bins predicted 0 for every action on 3000 frames: {dead_bins(Path(folder))}")
+            print(f"{folder}: bins predicted 0 for every action on {DEAD_FRAMES} frames: "
+                  f"{dead_bins(Path(folder))}")
         return 0
     if args.action == "compare":
         pairs = [item.partition("=") for item in args.out.split(",")]

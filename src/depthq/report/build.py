@@ -132,4 +132,3 @@ def findings_sections(path: Path = FINDINGS) -> list[tuple[str, str]]:
     intro = "<p>What depthq's own measurements say (not this run's: see the pages named).</p>"
     return [("The paper's claims here", intro + page.table(claims)),
             ("Deviations from the paper", page.table(deviations))]
-

@@ -61,7 +61,10 @@ class Findings:
 
 def read_findings(path: Path = FINDINGS) -> Findings:
     """The findings file, checked field by field (a clear error names the bad entry)."""
-    raw = read_json(path)
+    return _parse(read_json(path), path)
+
+
+def _parse(raw: Any, path: Path) -> Findings:
     try:
         claims = tuple(
             Claim(c["id"], c["claim"], c["verdict"], c["where"],
@@ -80,8 +83,8 @@ def read_findings(path: Path = FINDINGS) -> Findings:
 def record_evidence(claim_id: str, key: str, evidence: Evidence, path: Path = FINDINGS) -> None:
     """Write (or replace) one measurement behind claim `claim_id`, under `key` (what it measured, e.g.
     'hard/eval, 500 runs'); the rest of the file is kept as it is."""
-    read_findings(path).claim(claim_id)  # an unknown claim or a malformed file: nothing written
     raw: dict[str, Any] = read_json(path)
+    _parse(raw, path).claim(claim_id)  # an unknown claim or a malformed file: nothing written
     for claim in raw["claims"]:
         if claim["id"] == claim_id:
             claim.setdefault("evidence", {})[key] = {"text": evidence.text, "by": evidence.by}
