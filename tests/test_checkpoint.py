@@ -220,18 +220,19 @@ def test_a_head_record_without_the_fields_added_since_reads_as_it_did(tmp_path: 
     first = {"kind": "depth", "feature_dim": 1280, "hidden": 4096, "n_bins": 26, "dropout": 0.0}
     cases = [  # (the fields a record has besides the first checkpoint's, the head it loads as)
         ({}, HeadConfig("depth", 1280, hidden=4096, dropout=0.0, action_scale=1.0, lookahead=1,
-                        feature_projection=0, form="concat")),
+                        feature_projection=0, form="concat", output_bias=0.0)),
         ({"action_scale": 10.0}, HeadConfig("depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0,
-                                            lookahead=1, feature_projection=0, form="concat")),
+                                            lookahead=1, feature_projection=0, form="concat",
+                                            output_bias=0.0)),
         ({"action_scale": 10.0, "lookahead": 3}, HeadConfig(
             "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=3, feature_projection=0,
-            form="concat")),
+            form="concat", output_bias=0.0)),
         ({"action_scale": 10.0, "lookahead": 1, "feature_projection": 256}, HeadConfig(
             "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=1, feature_projection=256,
-            form="concat")),
+            form="concat", output_bias=0.0)),
         ({"action_scale": 10.0, "lookahead": 1, "feature_projection": 0, "form": "depth_first"}, HeadConfig(
             "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=1, feature_projection=0,
-            form="depth_first")),
+            form="depth_first", output_bias=0.0)),
     ]
     for n, (fields, expected) in enumerate(cases):
         for version in (1, FORMAT_VERSION):

@@ -30,6 +30,7 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert json.loads((out / "models" / names[1] / "config.json").read_text())["train"]["bootstrap"] == 0.5
     rows = oracle_gap.table(out, setup, candidates).splitlines()
     assert len(rows) == 4 and rows[3].startswith("| bootstrap | 6 | 1 | ")
+    assert oracle_gap.main(["table", str(out), "--only", "no such candidate"]) == 2
     summary = json.loads((out / "eval" / names[1] / "summary.json").read_text())["summary"]
     assert f"{summary['distance_to_collision_mean']:.2f}" in rows[3]
     assert f"| b | `{names[1]}` | {summary['distance_to_collision_mean']:.2f} |" in oracle_gap.compare(

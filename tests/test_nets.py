@@ -311,3 +311,21 @@ def test_a_depth_first_head_perceives_the_current_bins_then_advances_them():
         assert (moved >= 0).all() and not torch.equal(moved[0], moved[1])  # the action matters
     with pytest.raises(ConfigError, match="depth_first"):
         paper_head("coll", 32, form="depth_first")
+
+
+@pytest.mark.parametrize("form", ["concat", "depth_first"])
+def test_an_output_bias_starts_every_depth_bin_alive(form):
+    """With the paper's zero bias about half the outputs start at 0 behind the final ReLU (a bin that
+    stays 0 is no reading to the policy); output_bias b starts the bin layers' biases at b metres."""
+    def zeros(bias: float) -> float:
+        torch.manual_seed(1)
+        head = build_head(paper_head("depth", 256, dropout=0.0, action_scale=10.0, form=form,
+                                     output_bias=bias)).eval()
+        with torch.no_grad():
+            return float((head(torch.rand(500, 256), torch.tensor([-1.0, 0.0, 1.0]).repeat(167)[:500]) == 0)
+                         .float().mean())
+    assert zeros(0.0) > 0.2 and zeros(1.0) < 0.01
+    for bad, match in (({"output_bias": -0.5}, "output_bias"), ({"output_bias": math.inf}, "output_bias"),
+                       ({"kind": "coll", "output_bias": 1.0}, "Depth-Q-Net")):
+        with pytest.raises(ConfigError, match=match):
+            paper_head(**{"kind": "depth", "feature_dim": 256, **bad})

@@ -2,8 +2,8 @@
 Coll-Q-Net, in the hard family's `val` canyons; and each model's agreement with the one-step oracle
 along its own runs.
 
-    python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500]
-    python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500]
+    python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
+    python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
     python -m depthq.experiments.oracle_gap predicts OUT [--figure PATH]
     python -m depthq.experiments.oracle_gap where OUT [--figure PATH]
     python -m depthq.experiments.oracle_gap dead MODEL[,MODEL…]
@@ -40,6 +40,7 @@ from scipy.stats import spearmanr
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError
 from depthq.evaluate.oracle import Oracle
 from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
@@ -85,6 +86,7 @@ CANDIDATES = (
     paper_head("mirrored samples, bootstrapped value γ = 0.9", "mirror=true", "bootstrap=0.9"),
     Candidate("Coll-Q-Net, mirrored samples", ("mirror=true",), net="coll"),
     Candidate("depth-first head (perception, then dynamics; the default)"),
+    Candidate("depth-first head, output bias 1 m (no dead bins)", ("output_bias=1.0",)),
 )
 
 
@@ -139,7 +141,9 @@ def measure(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDA
             for name in model_names(setup, candidate, size):
                 folder = out / "eval" / name
                 if name not in done and (folder / "summary.json").is_file():
-                    done[name] = measure_agreement(folder, Oracle(), out / "probe", predictions=True)
+                    measured = measure_agreement(folder, Oracle(), out / "probe", predictions=True)
+                    # merged with the file as it is now: another candidate's run may have written it
+                    done = {**(read_json(path) if path.is_file() else {}), **done, name: measured}
                     write_json(path, done)
     return done
 
@@ -452,6 +456,8 @@ def main(argv: list[str] | None = None) -> int:
                                     "both networks); compare: NAME=EVAL,NAME=EVAL,…; dead: MODEL,MODEL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
+    parser.add_argument("--only", default="",
+                        help="run, table: only the candidates whose name contains this text")
     parser.add_argument("--pattern", default=PATTERN,
                         help="paired: a model's evaluation folder under OUT, from {net}, {n} and {seed}")
     parser.add_argument("--figure", type=Path,
@@ -483,8 +489,11 @@ def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
                 record_evidence(args.claim, key, Evidence(text, command), args.findings)
                 print(f"{args.findings}: claim {args.claim}, {key}: {text}")
         return 0
+    candidates = tuple(c for c in CANDIDATES if args.only in c.name)
+    if not candidates:
+        raise ConfigError(f"--only {args.only!r}: no candidate's name contains it")
     if args.action == "run":
-        return run(args.out, setup)
+        return run(args.out, setup, candidates)
     if args.action == "where":
         print(where(args.out))
         plot_where(args.out, args.figure or args.out / "where.png")
@@ -493,7 +502,7 @@ def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
         print(predicts(args.out))
         plot_predicts(args.out, args.figure or args.out / "diagnostics.png")
         return 0
-    print(table(args.out, setup))
+    print(table(args.out, setup, candidates))
     return 0
 
 

@@ -69,9 +69,10 @@ def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> to
     arrays = view_arrays(dataset, "train", config.runs, net, config.samples)
     samples = FeatureSamples(arrays, table, "train")
     torch.manual_seed(config.seed)
+    # One step, the action appended, the input unprojected.
     head = build_head(HeadConfig(net, table.features.shape[1], hidden=config.hidden, dropout=0.0,
                                  action_scale=config.action_scale, lookahead=1, feature_projection=0,
-                                 form="concat"))  # one step, the action appended, the input unprojected
+                                 form="concat", output_bias=config.output_bias))
     model = torch.nn.Module()
     model.head = head  # `train_step` runs `samples.predict(model, batch)`, which calls model.head
     optimizer = make_optimizer(head, config.learning_rate, config.weight_decay, config.rho, config.eps)

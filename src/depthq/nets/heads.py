@@ -23,6 +23,7 @@ dict and outputs.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -70,6 +71,7 @@ class HeadConfig:
     lookahead: int  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
     feature_projection: int  # P > 0: the feature projected to P numbers first; 0: none
     form: str  # one of HEAD_FORMS (`TrainConfig.head_form`)
+    output_bias: float  # the initial bias of a layer that outputs depth bins, m (`TrainConfig.output_bias`)
     n_bins: int = 26  # the depth bins (`depthq.sim.sensors.BinConfig`); not a training setting
 
     def __post_init__(self) -> None:
@@ -92,6 +94,12 @@ class HeadConfig:
                 f"HeadConfig.form {self.form!r} is a one-step Depth-Q-Net's (kind depth, lookahead 1), "
                 f"got kind {self.kind!r}, lookahead {self.lookahead!r}"
             )
+        bias = self.output_bias
+        if isinstance(bias, bool) or not isinstance(bias, int | float) or not 0 <= bias < math.inf:
+            raise ConfigError(f"HeadConfig.output_bias must be a finite number >= 0, got {bias!r}")
+        if bias and self.kind != "depth":
+            raise ConfigError(f"HeadConfig.output_bias {bias}: a Depth-Q-Net's (its outputs are depth bins), "
+                              f"got kind {self.kind!r}")
         p = self.feature_projection
         if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p <= self.feature_dim:
             raise ConfigError(
@@ -188,11 +196,12 @@ class Head(nn.Module):
 
 class DepthHead(Head):
     """Depth-Q-Net head: predicted depth bins at t+1, (B, n_bins), ≥ 0; with lookahead K > 1 at
-    t+1 … t+K, (B, K, n_bins)."""
+    t+1 … t+K, (B, K, n_bins). Its output layer's bias starts at `output_bias`."""
 
     def __init__(self, config: HeadConfig) -> None:
         outputs = len(ANCHORS) if config.form == "per_action" else config.lookahead
         super().__init__(config, nn.Linear(config.hidden, outputs * config.n_bins))
+        nn.init.constant_(self.output.bias, config.output_bias)
 
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         bins = F.relu(self.output(self.hidden_features(feature, action)))
@@ -206,7 +215,8 @@ class DepthHead(Head):
 class DepthFirstHead(Head):
     """Depth-Q-Net head of form "depth_first" (docs/design.md#depth-first): perception, the current
     frame's bins from the feature (hidden layer → FC n_bins), then dynamics, the next frame's bins
-    from those and the action (FC hidden + ReLU → FC n_bins + ReLU), as a net given the LiDAR would.
+    from those and the action (FC hidden + ReLU → FC n_bins + ReLU), as a net given the LiDAR would;
+    both bin layers' biases start at `output_bias`.
     Training fits each part to its own LiDAR target (`perceive` to bins[t], `advance` to bins[t+1]
     from the true bins[t]); acting chains them."""
 
@@ -218,6 +228,8 @@ class DepthFirstHead(Head):
                                       nn.Linear(config.hidden, n)),
         })
         super().__init__(config, parts)
+        for layer in (parts["current"], parts["dynamics"][-1]):
+            nn.init.constant_(layer.bias, config.output_bias)
 
     def perceive(self, feature: torch.Tensor) -> torch.Tensor:
         """(B, D) → (B, n_bins): the current frame's bins as the feature shows them (unbounded)."""

@@ -118,6 +118,10 @@ class TrainConfig:
     # per_action (bins per anchor action); none: depth_first for a one-step Depth-Q-Net, else concat.
     # A Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
     head_form: str | None = None
+    # The initial bias of Depth-Q-Net's layers that output depth bins, in metres (the paper's: 0). Above 0,
+    # an output unit behind the final ReLU starts alive for every input, so none is dead (always 0, no
+    # reading to the policy) from the initialisation on (docs/oracle_gap.md#dead-bins).
+    output_bias: float = field(default=0.0, metadata=OMIT_DEFAULT)
     # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
     # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
     # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
@@ -238,7 +242,8 @@ class TrainConfig:
         """The head this training builds."""
         return HeadConfig(self.model, TRUNKS[self.trunk].feature_dim, hidden=self.hidden,
                           dropout=self.dropout, action_scale=self.action_scale, lookahead=self.lookahead,
-                          feature_projection=self.feature_projection, form=self.head_form)
+                          feature_projection=self.feature_projection, form=self.head_form,
+                          output_bias=self.output_bias)
 
     def _check_snapshots(self) -> None:
         if not isinstance(self.snapshots, tuple):
