@@ -1,5 +1,5 @@
 """The experiments behind the docs' measurements (ablation, action fidelity, hard canyons, the
-investigation, the lookahead table, precision, success vs runs, val choices) at toy size: real
+investigation, the lookahead table, precision, success vs runs, val choices, DAgger rounds) at toy size: real
 collections in the hard family, real trainings and evaluations, a copy of the suite's smoke run."""
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 
 from depthq import experiments
+from depthq.control.action_selection import ACTIONS
+from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.evaluate.online import EvalConfig
@@ -23,6 +25,7 @@ from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.experiments import (
     ablation,
     action_fidelity,
+    dagger,
     hard_canyons,
     investigation,
     lookahead,
@@ -137,6 +140,45 @@ def test_precision_compares_bf16_decisions_with_the_policys_own(hard_checkpoints
     result = precision.measure(hard_checkpoints[0], frames=8)  # asserts fp32 decides as the policy does
     assert result["frames"] == 8 and 0 <= result["changed"] <= 8
     assert 0 < result["fp32_ms"] < 1e4 and 0 < result["bf16_ms"] < 1e4
+
+
+@pytest.mark.slow
+def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_and_resumes(
+    hard_data: Path, tmp_path: Path
+) -> None:
+    # The smoke preset's toy training; driven in one paper canyon (shorter runs than a hard one's).
+    setup = dagger.Setup(str(hard_data), preset="smoke", canyons="val:1000-1000", runs=3, rounds=1,
+                         round_runs=1)
+    out = tmp_path / "dagger"
+    assert dagger.run(out, setup) == 0
+    base, data = Dataset.open(hard_data), Dataset.open(out / "s0" / "round1" / "data")
+    usable = dagger.base_indices(base, setup)
+    first, new = list(range(usable[1] + 1)), list(range(usable[1] + 1, usable[2] + 1))
+    assert data.config["rounds"] == [{"round": 1, "driver": "round0/model", "noise": 1.0, "indices": new}]
+    for entry in [base.entry("train", i) for i in first] + base.entries("val"):  # linked, unchanged
+        assert data.entry(entry.split, entry.index) == entry
+    assert [e.index for e in data.entries("train")] == first + new  # no gap: every run a sample's
+    new = new[-1]
+    # Round 1's run drives the base run's canyon with its seeds; each command is the policy's action
+    # plus the same OU command the base run had (where the robot's limit did not clip it).
+    ours, theirs = data.entry("train", new), base.entry("train", new)
+    assert (ours.canyon_seed, ours.policy_seed) == (theirs.canyon_seed, theirs.policy_seed)
+    ou = OUPolicy(OUConfig(**base.config["ou"]), seed=ours.policy_seed)
+    commands = np.array([ou.act() for _ in range(base.config["skip_frames"] + ours.n_frames)])
+    actions = data.read_run(ours, images=False).actions[:-1]
+    residual = actions - commands[base.config["skip_frames"]:][: len(actions)]
+    inside = np.abs(actions) < base.config["env"]["world"]["max_yaw_rate"] - 1e-4
+    assert inside.any() and np.allclose(np.min(np.abs(residual[inside, None] - np.array(ACTIONS)), axis=1), 0,
+                                        atol=1e-5)
+    assert np.abs(residual[inside]).max() > 0.5  # the policy steered, not only the noise
+    names = ["round0", "round1", "coll"]
+    assert all((out / "s0" / "eval" / n / "summary.json").is_file() for n in names)
+    rows = dagger.table(out, setup).splitlines()
+    assert len(rows) == 2 + 3 and rows[2].startswith("| Depth-Q-Net, round 0 (exploration runs only) | 1 | ")
+    manifest = (data.root / "manifest.json").read_bytes()
+    assert dagger.run(out, setup) == 0 and (data.root / "manifest.json").read_bytes() == manifest  # resumed
+    assert dagger.main(["run", str(out)]) == 2  # no --base
+    assert dagger.main(["run", str(out), "--base", str(hard_data), "--runs", "3", "--rounds", "3"]) == 2
 
 
 @pytest.mark.slow

@@ -25,6 +25,7 @@ from tqdm import tqdm
 
 from depthq.configio import to_dict
 from depthq.control.ou import OUConfig, OUPolicy
+from depthq.control.policy import Policy
 from depthq.data import DataConfig
 from depthq.data.labels import usable as is_usable
 from depthq.data.manifest import Dataset, run_path
@@ -94,20 +95,27 @@ def run_seeds(seed: int, split: str, index: int) -> tuple[int, int]:
     return int(env_seed), int(policy_seed)
 
 
-def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, index: int) -> Run:
+def collect_run(
+    env: CanyonEnv, config: CollectConfig, seed: int, split: str, index: int, driver: Policy | None = None
+) -> Run:
     """Drive one OU run until a bump, a contact, the time limit or `max_steps`.
 
     Every observation is a frame but the first `skip_frames`; a stored action is the yaw rate the
     robot was commanded after its frame (unclipped: labels clip it, `DataConfig.action_clip`).
+    With a `driver` the command is its yaw rate plus the OU command (a DAgger round: the states the
+    policy drives itself into, its actions as varied as the exploration's); the labels are the same.
     """
     env_seed, policy_seed = run_seeds(seed, split, index)
     canyon = CanyonId(split, index, config.env.world.family)
     policy = OUPolicy(config.ou, seed=policy_seed)
+    if driver is not None:
+        driver.reset(policy_seed)
     limit = config.env.world.max_yaw_rate
     obs, info = env.reset(seed=env_seed, options={"canyon": canyon})
     frames, actions, end_reason = [(obs, info)], [], "step_limit"
     for _ in range(config.max_steps):
-        actions.append(float(np.clip(policy.act(obs), -limit, limit)))
+        command = policy.act(obs) + (driver.act(obs) if driver is not None else 0.0)
+        actions.append(float(np.clip(command, -limit, limit)))
         obs, _, terminated, truncated, info = env.step(np.array([actions[-1]], np.float32))
         frames.append((obs, info))
         if terminated or truncated:
@@ -138,10 +146,12 @@ def collect_run(env: CanyonEnv, config: CollectConfig, seed: int, split: str, in
 
 
 def collect_and_write(
-    env: CanyonEnv, config: CollectConfig, seed: int, root: Path, split: str, index: int
+    env: CanyonEnv, config: CollectConfig, seed: int, root: Path, split: str, index: int,
+    driver: Policy | None = None,
 ) -> tuple[RunMeta, FileInfo]:
-    """One run collected and written to its file (not yet recorded: only the parent writes the manifest)."""
-    run = collect_run(env, config, seed, split, index)
+    """One run collected (`collect_run`) and written to its file (not yet recorded: only the parent
+    writes the manifest)."""
+    run = collect_run(env, config, seed, split, index, driver)
     return run.meta, write_run(run_path(root, split, index), run, config.data.jpeg_quality)
 
 

@@ -1,0 +1,241 @@
+"""DAgger with a self-supervised label (docs/oracle_gap.md#dagger): rounds of collection driven by the
+learned Depth-Q-Net (the exploration's OU command added to its action), each run labelled as every run
+is, by the depth that follows (no collision needed), aggregated with the exploration runs at the
+baseline's number of training runs and in its canyons; Coll-Q-Net is offered the same aggregate.
+
+    python -m depthq.experiments.dagger run OUT --base DATA [--seeds 0,1] [--rounds 2] [--round-runs 100]
+    python -m depthq.experiments.dagger table OUT [--seeds 0,1] [--baseline SWEEP]
+
+With `runs` = N training runs in all and R rounds of M runs, round 0 is Depth-Q-Net trained on the
+base's first N − R·M usable runs; round r drives the canyons of the base's next M usable runs (and of
+the unusable ones between them), with their noise seeds, by round r − 1's model, and trains on
+everything so far. Layout of OUT:
+
+    OUT/s<seed>/round<r>/data     round r's dataset: the base's runs it keeps and all its `val` runs
+                                  (hard links), and the runs of rounds 1 … r; its manifest's config is
+                                  the base's plus `rounds` (each round's driver, noise and run indices)
+    OUT/s<seed>/round<r>/model    Depth-Q-Net trained on it (round 0: on the base's runs alone)
+    OUT/s<seed>/coll              Coll-Q-Net trained on the last round's data
+    OUT/s<seed>/eval/<model>      each model driven in the `val` canyons (round0 … roundR, coll)
+
+Every step resumes: a dataset's runs are recorded one by one, a training from its last epoch, an
+evaluation is kept once its summary is written. The `eval` canyons are never driven here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from depthq.configio import from_dict
+from depthq.data.labels import usable
+from depthq.data.manifest import Dataset
+from depthq.data.recorder import CollectConfig, collect_and_write
+from depthq.errors import ConfigError
+from depthq.evaluate.online import evaluate
+from depthq.experiments.cells import mean_interval
+from depthq.experiments.cli import guarded
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.sweep import Model, Sweep, parse_ints, retarget, widened
+from depthq.policies.registry import make_policy
+from depthq.sim.env import CanyonEnv
+from depthq.train.folder import saved_epoch
+from depthq.train.trainer import train
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The rounds: the baseline's dataset, preset and `val` canyons, how many runs in all and per round."""
+
+    base: str  # the baseline's dataset folder (exploration runs); holds at least `runs` usable ones
+    preset: str = "hard"
+    canyons: str = "hard/val:1000-1019"
+    runs: int = 500  # training runs in all, as many as the baseline's
+    rounds: int = 2
+    round_runs: int = 100  # runs per round, each driven by the previous round's model
+    noise: float = 1.0  # the OU command added to the policy's, as a multiple of the exploration's
+    seeds: tuple[int, ...] = (0,)
+
+    def __post_init__(self) -> None:
+        for name in ("runs", "rounds", "round_runs"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                flag = name.replace("_", "-")
+                raise ConfigError(f"dagger: --{flag} must be an integer >= 1, got {value!r}")
+        if self.rounds * self.round_runs >= self.runs:
+            raise ConfigError(f"dagger: {self.rounds} rounds of {self.round_runs} runs leave no exploration "
+                              f"runs of {self.runs} for round 0")
+        if not 0 <= self.noise < float("inf"):
+            raise ConfigError(f"dagger: --noise must be a finite number >= 0, got {self.noise!r}")
+
+    @property
+    def first(self) -> int:
+        """The base's runs round 0 trains on."""
+        return self.runs - self.rounds * self.round_runs
+
+
+def sweep_of(setup: Setup, seed: int, net: str) -> Sweep:
+    """The preset's sweep for one network and seed in the setup's canyons: its training settings
+    and evaluation."""
+    return widened(retarget(get_preset(setup.preset), None, setup.canyons), runs=setup.runs,
+                   name=f"{setup.preset} dagger", subsets=(setup.runs,), seeds=(seed,), nets=(net,))
+
+
+def base_indices(base: Dataset, setup: Setup) -> list[int]:
+    """The training-run indices of the base's first `runs` usable runs (the baseline's data)."""
+    min_frames = int(base.config["data"]["min_frames"])
+    indices = [e.index for e in base.entries("train") if usable(e, min_frames)][: setup.runs]
+    if len(indices) < setup.runs:
+        raise ConfigError(f"dagger: {base.root} holds {len(indices)} usable training runs, "
+                          f"--runs is {setup.runs}")
+    return indices
+
+
+def round_indices(setup: Setup, indices: list[int], r: int) -> list[int]:
+    """Round r's runs: the base's training-run indices from the one after round r − 1's last to its
+    M-th usable run after that (round 0: from 0 to its N − R·M-th), the unusable ones between
+    included, so that every round's dataset has its runs without a gap (`usable_runs`)."""
+    end = setup.first + r * setup.round_runs - 1  # position of the round's last usable run
+    start = 0 if r == 0 else indices[end - setup.round_runs] + 1
+    return list(range(start, indices[end] + 1))
+
+
+def _link(source: Path, target: Path) -> None:
+    """`target` as a hard link of `source` (a copy across file systems); run files are never rewritten
+    in place, so the two never diverge."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.unlink(missing_ok=True)
+    try:
+        os.link(source, target)
+    except OSError:
+        shutil.copyfile(source, target)
+
+
+def round_data(folder: Path, base: Dataset, setup: Setup, r: int) -> Dataset:
+    """Round r's dataset (r ≥ 1), collected or resumed: round r − 1's runs (round 1: the base's first
+    runs and its `val` runs) linked, then round r's driven by round r − 1's model."""
+    indices = base_indices(base, setup)
+    rounds = [{"round": k, "driver": f"round{k - 1}/model", "noise": setup.noise,
+               "indices": round_indices(setup, indices, k)} for k in range(1, r + 1)]
+    first = [base.entry("train", i) for i in round_indices(setup, indices, 0)]
+    dataset = Dataset.create(folder / f"round{r}" / "data", {**base.config, "rounds": rounds}, base.seed)
+    previous = base if r == 1 else Dataset.open(folder / f"round{r - 1}" / "data")
+    kept = previous.entries() if r > 1 else first + base.entries("val")
+    for entry in kept:
+        if not dataset.has(entry.split, entry.index):
+            _link(previous.path(entry), dataset.run_path(entry.split, entry.index))
+            dataset.add(entry.run_meta(), entry.info)
+    todo = [i for i in rounds[-1]["indices"] if not dataset.has("train", i)]
+    if todo:
+        collect = from_dict(CollectConfig, {**base.config, "seed": base.seed})
+        collect = replace(collect, ou=replace(collect.ou, scale=collect.ou.scale * setup.noise))
+        driver = make_policy(str(folder / f"round{r - 1}" / "model"), device="cpu")
+        env = CanyonEnv(collect.env)
+        try:
+            for index in tqdm(todo, desc=f"round {r}: collect", unit="run", dynamic_ncols=True):
+                dataset.add(*collect_and_write(env, collect, base.seed, dataset.root, "train", index, driver))
+        finally:
+            env.close()
+    return dataset
+
+
+def _train(setup: Setup, seed: int, net: str, data: Path, runs: int | None, folder: Path) -> None:
+    """The preset's `net` trained on `data` (its first `runs` usable runs; None: all) into `folder`."""
+    config = sweep_of(setup, seed, net).train_config(Model(net, setup.runs, seed), str(data))
+    config = replace(config, runs=runs)
+    if saved_epoch(folder) < config.epochs:
+        train(config, folder)
+
+
+def _evaluate(setup: Setup, seed: int, model: Path, out: Path) -> None:
+    if not (out / "summary.json").is_file():
+        evaluate(str(model), out, sweep_of(setup, seed, "depth").eval_config(), workers=1, video=False)
+
+
+def run(out: Path, setup: Setup) -> int:
+    """Every seed's rounds, then Coll-Q-Net on the last round's data; each model driven in the canyons."""
+    base = Dataset.open(Path(setup.base))
+    for seed in setup.seeds:
+        folder = out / f"s{seed}"
+        _train(setup, seed, "depth", base.root, setup.first, folder / "round0" / "model")
+        _evaluate(setup, seed, folder / "round0" / "model", folder / "eval" / "round0")
+        for r in range(1, setup.rounds + 1):
+            data = round_data(folder, base, setup, r)
+            _train(setup, seed, "depth", data.root, None, folder / f"round{r}" / "model")
+            _evaluate(setup, seed, folder / f"round{r}" / "model", folder / "eval" / f"round{r}")
+        last = folder / f"round{setup.rounds}" / "data"
+        _train(setup, seed, "coll", last, None, folder / "coll")
+        _evaluate(setup, seed, folder / "coll", folder / "eval" / "coll")
+    print(table(out, setup))
+    return 0
+
+
+def _summary(folder: Path) -> dict[str, Any] | None:
+    path = folder / "summary.json"
+    return json.loads(path.read_text())["summary"] if path.is_file() else None
+
+
+def table(out: Path, setup: Setup, baseline: Path | None = None) -> str:
+    """Markdown: each model's distance to the first collision (mean over seeds, 95 % interval with 2 or
+    more) and ends reached, per round; with `baseline` (a sweep folder of the base's data) the
+    exploration-only models at `runs` beside them."""
+    rows = [(f"Depth-Q-Net, round {r}" + (" (exploration runs only)" if r == 0 else ""),
+             [out / f"s{s}" / "eval" / f"round{r}" for s in setup.seeds]) for r in range(setup.rounds + 1)]
+    rows.append((f"Coll-Q-Net on round {setup.rounds}'s data",
+                 [out / f"s{s}" / "eval" / "coll" for s in setup.seeds]))
+    if baseline is not None:
+        rows += [(f"{name}, {setup.runs} exploration runs (baseline)",
+                  [baseline / "eval" / f"{net}_n{setup.runs}_s{s}" for s in setup.seeds])
+                 for name, net in (("Depth-Q-Net", "depth"), ("Coll-Q-Net", "coll"))]
+    lines = ["| model | seeds | to first collision (m) | ends reached /20 |", "|---|---|---|---|"]
+    for name, folders in rows:
+        found = [s for s in map(_summary, folders) if s is not None]
+        if found:
+            ends = sum(s["reached_end"] for s in found) / len(found)
+            d2c = [s["distance_to_collision_mean"] for s in found]
+            lines.append(f"| {name} | {len(found)} | {mean_interval(d2c, '.2f')} | {ends:.1f} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.dagger",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("action", choices=("run", "table"))
+    parser.add_argument("out", type=Path, help="the experiment's folder")
+    parser.add_argument("--base", default="", help="run: the baseline's dataset folder (exploration runs)")
+    parser.add_argument("--preset", default=Setup.preset, help="whose training settings and canyons' family")
+    parser.add_argument("--canyons", default=Setup.canyons, help="where each model is driven (val canyons)")
+    parser.add_argument("--runs", type=int, default=Setup.runs, help="training runs in all")
+    parser.add_argument("--rounds", type=int, default=Setup.rounds,
+                        help="rounds driven by the learned policy")
+    parser.add_argument("--round-runs", type=int, default=Setup.round_runs, help="runs per round")
+    parser.add_argument("--noise", type=float, default=Setup.noise,
+                        help="the OU command added to the policy's, as a multiple of the exploration's")
+    parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
+    parser.add_argument("--baseline", type=Path, help="table: a sweep folder of the base's data, its "
+                                                      "exploration-only models shown beside")
+    args = parser.parse_args(argv)
+
+    def act() -> int:
+        if args.action == "run" and not args.base:
+            raise ConfigError("dagger run: --base DATA (the baseline's dataset folder) is required")
+        setup = Setup(args.base, args.preset, args.canyons, args.runs, args.rounds, args.round_runs,
+                      args.noise, parse_ints(args.seeds, "--seeds"))
+        if args.action == "run":
+            return run(args.out, setup)
+        print(table(args.out, setup, args.baseline))
+        return 0
+
+    return guarded(f"python -m depthq.experiments.dagger {args.action}", act)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
