@@ -12,7 +12,8 @@ manifest.json:
     format, format_version      "depthq-dataset", 1
     provenance                  package and version that wrote it (`depthq.configio.provenance`)
     seed                        the collection seed
-    config                      the collection config that made the runs (a JSON object)
+    config                      the collection config that made the runs (a JSON object); a DAgger
+                                round's adds `rounds` (docs/formats.md#manifest)
     runs                        one row per completed run, sorted by split and index:
         split, index            "train" | "val", position in that split (the file name says both)
         file                    path relative to DIR, e.g. "runs/train_000123.h5"

@@ -8,8 +8,9 @@ baseline's number of training runs and in its canyons; Coll-Q-Net is offered the
 
 With `runs` = N training runs in all and R rounds of M runs, round 0 is Depth-Q-Net trained on the
 base's first N − R·M usable runs; round r drives the canyons of the base's next M usable runs (and of
-the unusable ones between them), with their noise seeds, by round r − 1's model, and trains on
-everything so far. Layout of OUT:
+the unusable ones between them), with their noise seeds, by round r − 1's model, and trains on the
+first N − R·M + r·M usable runs so far: as many as the baseline's (more of the policy's runs may be
+usable, and the last ones are then left out). Layout of OUT:
 
     OUT/s<seed>/round<r>/data     round r's dataset: the base's runs it keeps and all its `val` runs
                                   (hard links), and the runs of rounds 1 … r; its manifest's config is
@@ -39,6 +40,7 @@ from depthq.configio import from_dict
 from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
+from depthq.data.subsets import usable_runs
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
 from depthq.experiments.cells import mean_interval
@@ -147,6 +149,13 @@ def round_data(folder: Path, base: Dataset, setup: Setup, r: int) -> Dataset:
     return dataset
 
 
+def _runs(data: Dataset, setup: Setup, r: int) -> int:
+    """The usable runs round r trains on: as many as the baseline had by then (N − R·M + r·M), or all
+    there are if the policy's runs left fewer usable (a run under min_frames frames is none)."""
+    min_frames = int(data.config["data"]["min_frames"])
+    return min(setup.first + r * setup.round_runs, len(usable_runs(data, "train", min_frames)))
+
+
 def _train(setup: Setup, seed: int, net: str, data: Path, runs: int | None, folder: Path) -> None:
     """The preset's `net` trained on `data` (its first `runs` usable runs; None: all) into `folder`."""
     config = sweep_of(setup, seed, net).train_config(Model(net, setup.runs, seed), str(data))
@@ -169,10 +178,10 @@ def run(out: Path, setup: Setup) -> int:
         _evaluate(setup, seed, folder / "round0" / "model", folder / "eval" / "round0")
         for r in range(1, setup.rounds + 1):
             data = round_data(folder, base, setup, r)
-            _train(setup, seed, "depth", data.root, None, folder / f"round{r}" / "model")
+            _train(setup, seed, "depth", data.root, _runs(data, setup, r), folder / f"round{r}" / "model")
             _evaluate(setup, seed, folder / f"round{r}" / "model", folder / "eval" / f"round{r}")
-        last = folder / f"round{setup.rounds}" / "data"
-        _train(setup, seed, "coll", last, None, folder / "coll")
+        last = Dataset.open(folder / f"round{setup.rounds}" / "data")
+        _train(setup, seed, "coll", last.root, _runs(last, setup, setup.rounds), folder / "coll")
         _evaluate(setup, seed, folder / "coll", folder / "eval" / "coll")
     print(table(out, setup))
     return 0
