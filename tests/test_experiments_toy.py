@@ -152,13 +152,17 @@ def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_an
     out = tmp_path / "dagger"
     assert dagger.run(out, setup) == 0
     base, data = Dataset.open(hard_data), Dataset.open(out / "s0" / "round1" / "data")
-    usable = dagger.base_indices(base, setup)
-    first, new = list(range(usable[1] + 1)), list(range(usable[1] + 1, usable[2] + 1))
-    assert data.config["rounds"] == [{"round": 1, "driver": "round0/model", "noise": 1.0, "indices": new}]
-    for entry in [base.entry("train", i) for i in first] + base.entries("val"):  # linked, unchanged
+    last = dagger.base_indices(base, setup)[1]  # round 0's last usable run
+    assert data.config["rounds"] == [{"round": 1, "driver": "round0/model", "noise": 1.0,
+                                      "first": last + 1}]
+    for entry in [base.entry("train", i) for i in range(last + 1)] + base.entries("val"):  # linked as is
         assert data.entry(entry.split, entry.index) == entry
-    assert [e.index for e in data.entries("train")] == first + new  # no gap: every run a sample's
-    new = new[-1]
+    # Round 1 drives on from there, without a gap, until it has its one usable run.
+    driven = [e for e in data.entries("train") if e.index > last]
+    assert [e.index for e in driven] == list(range(last + 1, last + 1 + len(driven)))
+    min_frames = base.config["data"]["min_frames"]
+    assert [e.n_frames >= min_frames for e in driven] == [False] * (len(driven) - 1) + [True]
+    new = driven[-1].index
     # Round 1's run drives the base run's canyon with its seeds; each command is the policy's action
     # plus the same OU command the base run had (where the robot's limit did not clip it).
     ours, theirs = data.entry("train", new), base.entry("train", new)

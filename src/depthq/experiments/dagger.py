@@ -7,14 +7,14 @@ baseline's number of training runs and in its canyons; Coll-Q-Net is offered the
     python -m depthq.experiments.dagger table OUT [--seeds 0,1] [--baseline SWEEP]
 
 With `runs` = N training runs in all and R rounds of M runs, round 0 is Depth-Q-Net trained on the
-base's first N − R·M usable runs; round r drives the canyons of the base's next M usable runs (and of
-the unusable ones between them), with their noise seeds, by round r − 1's model, and trains on the
-first N − R·M + r·M usable runs so far: as many as the baseline's (more of the policy's runs may be
-usable, and the last ones are then left out). Layout of OUT:
+base's first N − R·M usable runs; round r drives the next training canyons (from the one after round
+r − 1's last), with the noise seeds the base's runs there had, by round r − 1's model until it has M
+usable runs (as `depthq collect` goes on past runs under min_frames frames), and trains on all so
+far: as many usable runs as the baseline's. Layout of OUT:
 
     OUT/s<seed>/round<r>/data     round r's dataset: the base's runs it keeps and all its `val` runs
                                   (hard links), and the runs of rounds 1 … r; its manifest's config is
-                                  the base's plus `rounds` (each round's driver, noise and run indices)
+                                  the base's plus `rounds` (each round's driver, noise and first run)
     OUT/s<seed>/round<r>/model    Depth-Q-Net trained on it (round 0: on the base's runs alone)
     OUT/s<seed>/coll              Coll-Q-Net trained on the last round's data
     OUT/s<seed>/eval/<model>      each model driven in the `val` canyons (round0 … roundR, coll)
@@ -40,7 +40,6 @@ from depthq.configio import from_dict
 from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
-from depthq.data.subsets import usable_runs
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
 from depthq.experiments.cells import mean_interval
@@ -101,13 +100,6 @@ def base_indices(base: Dataset, setup: Setup) -> list[int]:
     return indices
 
 
-def round_indices(setup: Setup, indices: list[int], r: int) -> list[int]:
-    """Round r's runs: the base's training-run indices from the one after round r − 1's last to its
-    M-th usable run after that (round 0: from 0 to its N − R·M-th), the unusable ones between
-    included, so that every round's dataset has its runs without a gap (`usable_runs`)."""
-    end = setup.first + r * setup.round_runs - 1  # position of the round's last usable run
-    start = 0 if r == 0 else indices[end - setup.round_runs] + 1
-    return list(range(start, indices[end] + 1))
 
 
 def _link(source: Path, target: Path) -> None:
@@ -124,36 +116,40 @@ def _link(source: Path, target: Path) -> None:
 def round_data(folder: Path, base: Dataset, setup: Setup, r: int) -> Dataset:
     """Round r's dataset (r ≥ 1), collected or resumed: round r − 1's runs (round 1: the base's first
     runs and its `val` runs) linked, then round r's driven by round r − 1's model."""
-    indices = base_indices(base, setup)
-    rounds = [{"round": k, "driver": f"round{k - 1}/model", "noise": setup.noise,
-               "indices": round_indices(setup, indices, k)} for k in range(1, r + 1)]
-    first = [base.entry("train", i) for i in round_indices(setup, indices, 0)]
+    min_frames = int(base.config["data"]["min_frames"])
+    if r == 1:
+        last = base_indices(base, setup)[setup.first - 1]
+        previous, kept = base, [e for e in base.entries() if e.split == "val" or e.index <= last]
+    else:
+        previous = Dataset.open(folder / f"round{r - 1}" / "data")
+        kept, last = previous.entries(), previous.entries("train")[-1].index
+    rounds = [*previous.config.get("rounds", []),
+              {"round": r, "driver": f"round{r - 1}/model", "noise": setup.noise, "first": last + 1}]
     dataset = Dataset.create(folder / f"round{r}" / "data", {**base.config, "rounds": rounds}, base.seed)
-    previous = base if r == 1 else Dataset.open(folder / f"round{r - 1}" / "data")
-    kept = previous.entries() if r > 1 else first + base.entries("val")
     for entry in kept:
         if not dataset.has(entry.split, entry.index):
             _link(previous.path(entry), dataset.run_path(entry.split, entry.index))
             dataset.add(entry.run_meta(), entry.info)
-    todo = [i for i in rounds[-1]["indices"] if not dataset.has("train", i)]
-    if todo:
-        collect = from_dict(CollectConfig, {**base.config, "seed": base.seed})
-        collect = replace(collect, ou=replace(collect.ou, scale=collect.ou.scale * setup.noise))
-        driver = make_policy(str(folder / f"round{r - 1}" / "model"), device="cpu")
-        env = CanyonEnv(collect.env)
-        try:
-            for index in tqdm(todo, desc=f"round {r}: collect", unit="run", dynamic_ncols=True):
+    index, driver, env = last + 1, None, None
+    bar = tqdm(total=setup.round_runs, desc=f"round {r}: collect", unit="usable run", dynamic_ncols=True)
+    try:
+        while (done := sum(usable(e, min_frames) for e in dataset.entries("train") if e.index > last)) \
+                < setup.round_runs:
+            bar.n = done
+            bar.refresh()
+            if not dataset.has("train", index):
+                if driver is None:
+                    collect = from_dict(CollectConfig, {**base.config, "seed": base.seed})
+                    collect = replace(collect, ou=replace(collect.ou, scale=collect.ou.scale * setup.noise))
+                    driver = make_policy(str(folder / f"round{r - 1}" / "model"), device="cpu")
+                    env = CanyonEnv(collect.env)
                 dataset.add(*collect_and_write(env, collect, base.seed, dataset.root, "train", index, driver))
-        finally:
+            index += 1
+    finally:
+        bar.close()
+        if env is not None:
             env.close()
     return dataset
-
-
-def _runs(data: Dataset, setup: Setup, r: int) -> int:
-    """The usable runs round r trains on: as many as the baseline had by then (N − R·M + r·M), or all
-    there are if the policy's runs left fewer usable (a run under min_frames frames is none)."""
-    min_frames = int(data.config["data"]["min_frames"])
-    return min(setup.first + r * setup.round_runs, len(usable_runs(data, "train", min_frames)))
 
 
 def _train(setup: Setup, seed: int, net: str, data: Path, runs: int | None, folder: Path) -> None:
@@ -178,10 +174,9 @@ def run(out: Path, setup: Setup) -> int:
         _evaluate(setup, seed, folder / "round0" / "model", folder / "eval" / "round0")
         for r in range(1, setup.rounds + 1):
             data = round_data(folder, base, setup, r)
-            _train(setup, seed, "depth", data.root, _runs(data, setup, r), folder / f"round{r}" / "model")
+            _train(setup, seed, "depth", data.root, None, folder / f"round{r}" / "model")
             _evaluate(setup, seed, folder / f"round{r}" / "model", folder / "eval" / f"round{r}")
-        last = Dataset.open(folder / f"round{setup.rounds}" / "data")
-        _train(setup, seed, "coll", last.root, _runs(last, setup, setup.rounds), folder / "coll")
+        _train(setup, seed, "coll", folder / f"round{setup.rounds}" / "data", None, folder / "coll")
         _evaluate(setup, seed, folder / "coll", folder / "eval" / "coll")
     print(table(out, setup))
     return 0
