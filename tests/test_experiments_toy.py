@@ -183,6 +183,7 @@ def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_an
     assert dagger.run(out, setup) == 0 and (data.root / "manifest.json").read_bytes() == manifest  # resumed
     assert dagger.main(["run", str(out)]) == 2  # no --base
     assert dagger.main(["run", str(out), "--base", str(hard_data), "--runs", "3", "--rounds", "3"]) == 2
+    assert dagger.main(["run", str(out), "--base", str(hard_data), "--net", "heuristic"]) == 2
 
 
 @pytest.mark.slow

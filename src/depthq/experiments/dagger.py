@@ -1,12 +1,13 @@
 """DAgger with a self-supervised label (docs/oracle_gap.md#dagger): rounds of collection driven by the
 learned Depth-Q-Net (the exploration's OU command added to its action), each run labelled as every run
 is, by the depth that follows (no collision needed), aggregated with the exploration runs at the
-baseline's number of training runs and in its canyons; Coll-Q-Net is offered the same aggregate.
+baseline's number of training runs; the other network is offered the same aggregate. With `--net
+coll` Coll-Q-Net drives its own rounds (its label needs the collisions its runs end in).
 
-    python -m depthq.experiments.dagger run OUT --base DATA [--seeds 0,1] [--rounds 2] [--round-runs 100]
-    python -m depthq.experiments.dagger table OUT [--seeds 0,1] [--baseline SWEEP]
+    python -m depthq.experiments.dagger run OUT --base DATA [--net depth] [--seeds 0,1] [--rounds 2]
+    python -m depthq.experiments.dagger table OUT [--net depth] [--seeds 0,1] [--baseline SWEEP]
 
-With `runs` = N training runs in all and R rounds of M runs, round 0 is Depth-Q-Net trained on the
+With `runs` = N training runs in all and R rounds of M runs, round 0 is the network trained on the
 base's first N − R·M usable runs; round r drives the next training canyons (from the one after round
 r − 1's last), with the noise seeds the base's runs there had, by round r − 1's model until it has M
 usable runs (as `depthq collect` goes on past runs under min_frames frames), and trains on all so
@@ -15,9 +16,9 @@ far: as many usable runs as the baseline's. Layout of OUT:
     OUT/s<seed>/round<r>/data     round r's dataset: the base's runs it keeps and all its `val` runs
                                   (hard links), and the runs of rounds 1 … r; its manifest's config is
                                   the base's plus `rounds` (each round's driver, noise and first run)
-    OUT/s<seed>/round<r>/model    Depth-Q-Net trained on it (round 0: on the base's runs alone)
-    OUT/s<seed>/coll              Coll-Q-Net trained on the last round's data
-    OUT/s<seed>/eval/<model>      each model driven in the `val` canyons (round0 … roundR, coll)
+    OUT/s<seed>/round<r>/model    the network trained on it (round 0: on the base's runs alone)
+    OUT/s<seed>/<other>           the other network (coll or depth) trained on the last round's data
+    OUT/s<seed>/eval/<model>      each model driven in the `val` canyons (round0 … roundR, <other>)
 
 Every step resumes: a dataset's runs are recorded one by one, a training from its last epoch, an
 evaluation is kept once its summary is written. The `eval` canyons are never driven here.
@@ -51,6 +52,8 @@ from depthq.sim.env import CanyonEnv
 from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
 
+NAMES = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}
+
 
 @dataclass(frozen=True)
 class Setup:
@@ -64,6 +67,7 @@ class Setup:
     round_runs: int = 100  # runs per round, each driven by the previous round's model
     noise: float = 1.0  # the OU command added to the policy's, as a multiple of the exploration's
     seeds: tuple[int, ...] = (0,)
+    net: str = "depth"  # the network whose policy drives the rounds
 
     def __post_init__(self) -> None:
         for name in ("runs", "rounds", "round_runs"):
@@ -76,6 +80,13 @@ class Setup:
                               f"runs of {self.runs} for round 0")
         if not 0 <= self.noise < float("inf"):
             raise ConfigError(f"dagger: --noise must be a finite number >= 0, got {self.noise!r}")
+        if self.net not in NAMES:
+            raise ConfigError(f"dagger: --net must be one of {tuple(NAMES)}, got {self.net!r}")
+
+    @property
+    def other(self) -> str:
+        """The network offered the last round's data."""
+        return "coll" if self.net == "depth" else "depth"
 
     @property
     def first(self) -> int:
@@ -162,22 +173,23 @@ def _train(setup: Setup, seed: int, net: str, data: Path, runs: int | None, fold
 
 def _evaluate(setup: Setup, seed: int, model: Path, out: Path) -> None:
     if not (out / "summary.json").is_file():
-        evaluate(str(model), out, sweep_of(setup, seed, "depth").eval_config(), workers=1, video=False)
+        evaluate(str(model), out, sweep_of(setup, seed, setup.net).eval_config(), workers=1, video=False)
 
 
 def run(out: Path, setup: Setup) -> int:
-    """Every seed's rounds, then Coll-Q-Net on the last round's data; each model driven in the canyons."""
-    base = Dataset.open(Path(setup.base))
+    """Every seed's rounds, then the other network on the last round's data; each model driven in the
+    canyons."""
+    base, other = Dataset.open(Path(setup.base)), setup.other
     for seed in setup.seeds:
         folder = out / f"s{seed}"
-        _train(setup, seed, "depth", base.root, setup.first, folder / "round0" / "model")
+        _train(setup, seed, setup.net, base.root, setup.first, folder / "round0" / "model")
         _evaluate(setup, seed, folder / "round0" / "model", folder / "eval" / "round0")
         for r in range(1, setup.rounds + 1):
             data = round_data(folder, base, setup, r)
-            _train(setup, seed, "depth", data.root, None, folder / f"round{r}" / "model")
+            _train(setup, seed, setup.net, data.root, None, folder / f"round{r}" / "model")
             _evaluate(setup, seed, folder / f"round{r}" / "model", folder / "eval" / f"round{r}")
-        _train(setup, seed, "coll", folder / f"round{setup.rounds}" / "data", None, folder / "coll")
-        _evaluate(setup, seed, folder / "coll", folder / "eval" / "coll")
+        _train(setup, seed, other, folder / f"round{setup.rounds}" / "data", None, folder / other)
+        _evaluate(setup, seed, folder / other, folder / "eval" / other)
     print(table(out, setup))
     return 0
 
@@ -191,14 +203,14 @@ def table(out: Path, setup: Setup, baseline: Path | None = None) -> str:
     """Markdown: each model's distance to the first collision (mean over seeds, 95 % interval with 2 or
     more) and ends reached, per round; with `baseline` (a sweep folder of the base's data) the
     exploration-only models at `runs` beside them."""
-    rows = [(f"Depth-Q-Net, round {r}" + (" (exploration runs only)" if r == 0 else ""),
+    rows = [(f"{NAMES[setup.net]}, round {r}" + (" (exploration runs only)" if r == 0 else ""),
              [out / f"s{s}" / "eval" / f"round{r}" for s in setup.seeds]) for r in range(setup.rounds + 1)]
-    rows.append((f"Coll-Q-Net on round {setup.rounds}'s data",
-                 [out / f"s{s}" / "eval" / "coll" for s in setup.seeds]))
+    rows.append((f"{NAMES[setup.other]} on round {setup.rounds}'s data",
+                 [out / f"s{s}" / "eval" / setup.other for s in setup.seeds]))
     if baseline is not None:
         rows += [(f"{name}, {setup.runs} exploration runs (baseline)",
                   [baseline / "eval" / f"{net}_n{setup.runs}_s{s}" for s in setup.seeds])
-                 for name, net in (("Depth-Q-Net", "depth"), ("Coll-Q-Net", "coll"))]
+                 for net, name in NAMES.items()]
     lines = ["| model | seeds | to first collision (m) | ends reached /20 |", "|---|---|---|---|"]
     for name, folders in rows:
         found = [s for s in map(_summary, folders) if s is not None]
@@ -224,6 +236,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noise", type=float, default=Setup.noise,
                         help="the OU command added to the policy's, as a multiple of the exploration's")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
+    parser.add_argument("--net", default=Setup.net, help="the network whose policy drives the rounds: "
+                                                         "depth or coll")
     parser.add_argument("--baseline", type=Path, help="table: a sweep folder of the base's data, its "
                                                       "exploration-only models shown beside")
     args = parser.parse_args(argv)
@@ -232,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.action == "run" and not args.base:
             raise ConfigError("dagger run: --base DATA (the baseline's dataset folder) is required")
         setup = Setup(args.base, args.preset, args.canyons, args.runs, args.rounds, args.round_runs,
-                      args.noise, parse_ints(args.seeds, "--seeds"))
+                      args.noise, parse_ints(args.seeds, "--seeds"), args.net)
         if args.action == "run":
             return run(args.out, setup)
         print(table(args.out, setup, args.baseline))
