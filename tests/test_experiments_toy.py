@@ -179,6 +179,8 @@ def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_an
     assert all((out / "s0" / "eval" / n / "summary.json").is_file() for n in names)
     rows = dagger.table(out, setup).splitlines()
     assert len(rows) == 2 + 3 and rows[2].startswith("| Depth-Q-Net, round 0 (exploration runs only) | 1 | ")
+    rows = dagger.stats(out, setup).splitlines()  # what round 1 adds: its one usable run
+    assert len(rows) == 2 + 2 and rows[3].startswith(f"| 0 | round 1 | 1 | {ours.n_frames:.1f} | ")
     manifest = (data.root / "manifest.json").read_bytes()
     assert dagger.run(out, setup) == 0 and (data.root / "manifest.json").read_bytes() == manifest  # resumed
     assert dagger.main(["run", str(out)]) == 2  # no --base

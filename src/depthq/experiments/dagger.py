@@ -6,6 +6,7 @@ coll` Coll-Q-Net drives its own rounds (its label needs the collisions its runs 
 
     python -m depthq.experiments.dagger run OUT --base DATA [--net depth] [--seeds 0,1] [--rounds 2]
     python -m depthq.experiments.dagger table OUT [--net depth] [--seeds 0,1] [--baseline SWEEP]
+    python -m depthq.experiments.dagger stats OUT [--seeds 0,1]
 
 With `runs` = N training runs in all and R rounds of M runs, round 0 is the network trained on the
 base's first N − R·M usable runs; round r drives the next training canyons (from the one after round
@@ -35,6 +36,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm import tqdm
 
 from depthq.configio import from_dict
@@ -221,10 +223,36 @@ def table(out: Path, setup: Setup, baseline: Path | None = None) -> str:
     return "\n".join(lines)
 
 
+NEAR = 0.5  # m: a frame whose nearest depth bin is closer than this is "near an obstacle"
+
+
+def stats(out: Path, setup: Setup) -> str:
+    """Markdown: what each round adds to the last round's dataset, per seed, counting the usable runs
+    (those trained on): runs, frames per run, runs ending in a collision, the mean |command| (as the
+    labels clip it), the share of commands at that clip, and the share of frames near an obstacle."""
+    lines = ["| seed | runs of | usable runs | frames per run | end in a collision | mean abs. command | "
+             "commands at the clip | frames with a bin < 0.5 m |", "|---|---|---|---|---|---|---|---|"]
+    for seed in setup.seeds:
+        dataset = Dataset.open(out / f"s{seed}" / f"round{setup.rounds}" / "data")
+        clip, min_frames = (float(dataset.config["data"][k]) for k in ("action_clip", "min_frames"))
+        firsts = [0] + [r["first"] for r in dataset.config["rounds"]]
+        for r, (lo, hi) in enumerate(zip(firsts, [*firsts[1:], float("inf")], strict=True)):
+            entries = [e for e in dataset.entries("train") if lo <= e.index < hi and usable(e, min_frames)]
+            runs = [dataset.read_run(e, images=False) for e in entries]
+            actions = np.abs(np.clip(np.concatenate([run.actions[:-1] for run in runs]), -clip, clip))
+            nearest = np.concatenate([np.nanmin(run.bins, axis=1) for run in runs])
+            lines.append(
+                f"| {seed} | {'exploration' if r == 0 else f'round {r}'} | {len(runs)} | "
+                f"{np.mean([run.meta.n_frames for run in runs]):.1f} | "
+                f"{np.mean([run.meta.collision for run in runs]):.0%} | {actions.mean():.2f} | "
+                f"{np.mean(actions >= clip - 1e-6):.0%} | {np.mean(nearest < NEAR):.0%} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m depthq.experiments.dagger",
                                      description=__doc__.split("\n")[0])
-    parser.add_argument("action", choices=("run", "table"))
+    parser.add_argument("action", choices=("run", "table", "stats"))
     parser.add_argument("out", type=Path, help="the experiment's folder")
     parser.add_argument("--base", default="", help="run: the baseline's dataset folder (exploration runs)")
     parser.add_argument("--preset", default=Setup.preset, help="whose training settings and canyons' family")
@@ -249,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
                       args.noise, parse_ints(args.seeds, "--seeds"), args.net)
         if args.action == "run":
             return run(args.out, setup)
+        if args.action == "stats":
+            print(stats(args.out, setup))
+            return 0
         print(table(args.out, setup, args.baseline))
         return 0
 
