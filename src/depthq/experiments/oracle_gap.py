@@ -87,6 +87,7 @@ CANDIDATES = (
     Candidate("Coll-Q-Net, mirrored samples", ("mirror=true",), net="coll"),
     Candidate("depth-first head (perception, then dynamics; the default)"),
     Candidate("depth-first head, output bias 1 m (no dead bins)", ("output_bias=1.0",)),
+    Candidate("depth-first head, width 1024", ("hidden=1024",)),
 )
 
 
