@@ -146,9 +146,9 @@ def test_precision_compares_bf16_decisions_with_the_policys_own(hard_checkpoints
 def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_and_resumes(
     hard_data: Path, tmp_path: Path
 ) -> None:
-    # The smoke preset's toy training; driven in one paper canyon (shorter runs than a hard one's).
+    # The smoke preset's toy training; each model driven for 10 s in one paper canyon.
     setup = dagger.Setup(str(hard_data), preset="smoke", canyons="val:1000-1000", runs=3, rounds=1,
-                         round_runs=1)
+                         round_runs=1, time_limit_s=10.0)
     out = tmp_path / "dagger"
     assert dagger.run(out, setup) == 0
     base, data = Dataset.open(hard_data), Dataset.open(out / "s0" / "round1" / "data")
@@ -176,7 +176,8 @@ def test_dagger_drives_a_round_with_the_learned_policy_beside_the_linked_base_an
                                         atol=1e-5)
     assert np.abs(residual[inside]).max() > 0.5  # the policy steered, not only the noise
     names = ["round0", "round1", "coll"]
-    assert all((out / "s0" / "eval" / n / "summary.json").is_file() for n in names)
+    configs = [json.loads((out / "s0" / "eval" / n / "summary.json").read_text())["config"] for n in names]
+    assert [c["time_limit_s"] for c in configs] == [10.0] * 3
     rows = dagger.table(out, setup).splitlines()
     assert len(rows) == 2 + 3 and rows[2].startswith("| Depth-Q-Net, round 0 (exploration runs only) | 1 | ")
     rows = dagger.stats(out, setup).splitlines()  # what round 1 adds: its one usable run

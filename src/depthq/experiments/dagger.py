@@ -70,6 +70,7 @@ class Setup:
     noise: float = 1.0  # the OU command added to the policy's, as a multiple of the exploration's
     seeds: tuple[int, ...] = (0,)
     net: str = "depth"  # the network whose policy drives the rounds
+    time_limit_s: float | None = None  # seconds per evaluation run; None: the canyons' family's
 
     def __post_init__(self) -> None:
         for name in ("runs", "rounds", "round_runs"):
@@ -99,8 +100,10 @@ class Setup:
 def sweep_of(setup: Setup, seed: int, net: str) -> Sweep:
     """The preset's sweep for one network and seed in the setup's canyons: its training settings
     and evaluation."""
+    limit = () if setup.time_limit_s is None else (("time_limit_s", setup.time_limit_s),)
     return widened(retarget(get_preset(setup.preset), None, setup.canyons), runs=setup.runs,
-                   name=f"{setup.preset} dagger", subsets=(setup.runs,), seeds=(seed,), nets=(net,))
+                   name=f"{setup.preset} dagger", subsets=(setup.runs,), seeds=(seed,), nets=(net,),
+                   evaluate=limit)
 
 
 def base_indices(base: Dataset, setup: Setup) -> list[int]:
@@ -266,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--net", default=Setup.net, help="the network whose policy drives the rounds: "
                                                          "depth or coll")
+    parser.add_argument("--time-limit", type=float, help="seconds per evaluation run (default: the "
+                                                         "canyons' family's)")
     parser.add_argument("--baseline", type=Path, help="table: a sweep folder of the base's data, its "
                                                       "exploration-only models shown beside")
     args = parser.parse_args(argv)
@@ -274,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.action == "run" and not args.base:
             raise ConfigError("dagger run: --base DATA (the baseline's dataset folder) is required")
         setup = Setup(args.base, args.preset, args.canyons, args.runs, args.rounds, args.round_runs,
-                      args.noise, parse_ints(args.seeds, "--seeds"), args.net)
+                      args.noise, parse_ints(args.seeds, "--seeds"), args.net, args.time_limit)
         if args.action == "run":
             return run(args.out, setup)
         if args.action == "stats":
