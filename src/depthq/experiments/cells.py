@@ -1,11 +1,21 @@
 """One table cell of the experiments' Markdown: the mean over seeds and its 95 % interval, so every
-table of docs/ spells a result the same way."""
+table of docs/ spells a result the same way; and the evaluation summary a cell is read from."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 
+from depthq.configio import read_json
 from depthq.report.tables import interval
+
+
+def evaluation_summary(folder: Path) -> dict[str, Any] | None:
+    """The `summary` of the evaluation folder `folder` (`depthq evaluate --out`); None if not written yet."""
+    path = Path(folder) / "summary.json"
+    return read_json(path)["summary"] if path.is_file() else None
 
 
 def mean_interval(values: list[float], fmt: str, seeds: int | None = None) -> str:

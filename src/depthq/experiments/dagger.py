@@ -28,13 +28,11 @@ evaluation is kept once its summary is written. The `eval` canyons are never dri
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -43,9 +41,10 @@ from depthq.configio import from_dict
 from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
+from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
-from depthq.experiments.cells import mean_interval
+from depthq.experiments.cells import evaluation_summary, mean_interval
 from depthq.experiments.cli import guarded
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import Model, Sweep, parse_ints, retarget, widened
@@ -107,15 +106,9 @@ def sweep_of(setup: Setup, seed: int, net: str) -> Sweep:
 
 
 def base_indices(base: Dataset, setup: Setup) -> list[int]:
-    """The training-run indices of the base's first `runs` usable runs (the baseline's data)."""
-    min_frames = int(base.config["data"]["min_frames"])
-    indices = [e.index for e in base.entries("train") if usable(e, min_frames)][: setup.runs]
-    if len(indices) < setup.runs:
-        raise ConfigError(f"dagger: {base.root} holds {len(indices)} usable training runs, "
-                          f"--runs is {setup.runs}")
-    return indices
-
-
+    """The training-run indices of the base's first `runs` usable runs (the baseline's data); a
+    ConfigError if it has fewer."""
+    return [e.index for e in select_runs(base, "train", setup.runs, int(base.config["data"]["min_frames"]))]
 
 
 def _link(source: Path, target: Path) -> None:
@@ -146,25 +139,26 @@ def round_data(folder: Path, base: Dataset, setup: Setup, r: int) -> Dataset:
         if not dataset.has(entry.split, entry.index):
             _link(previous.path(entry), dataset.run_path(entry.split, entry.index))
             dataset.add(entry.run_meta(), entry.info)
-    index, driver, env = last + 1, None, None
-    bar = tqdm(total=setup.round_runs, desc=f"round {r}: collect", unit="usable run", dynamic_ncols=True)
+    done = sum(usable(e, min_frames) for e in dataset.entries("train") if e.index > last)
+    if done >= setup.round_runs:
+        return dataset
+    collect = from_dict(CollectConfig, {**base.config, "seed": base.seed})
+    collect = replace(collect, ou=replace(collect.ou, scale=collect.ou.scale * setup.noise))
+    driver = make_policy(str(folder / f"round{r - 1}" / "model"), device="cpu")
+    env, index = CanyonEnv(collect.env), last + 1
+    bar = tqdm(total=setup.round_runs, initial=done, desc=f"round {r}: collect", unit="usable run",
+               dynamic_ncols=True)
     try:
-        while (done := sum(usable(e, min_frames) for e in dataset.entries("train") if e.index > last)) \
-                < setup.round_runs:
-            bar.n = done
-            bar.refresh()
-            if not dataset.has("train", index):
-                if driver is None:
-                    collect = from_dict(CollectConfig, {**base.config, "seed": base.seed})
-                    collect = replace(collect, ou=replace(collect.ou, scale=collect.ou.scale * setup.noise))
-                    driver = make_policy(str(folder / f"round{r - 1}" / "model"), device="cpu")
-                    env = CanyonEnv(collect.env)
-                dataset.add(*collect_and_write(env, collect, base.seed, dataset.root, "train", index, driver))
+        while done < setup.round_runs:
+            if not dataset.has("train", index):  # a resumed round's runs are counted in `done` already
+                meta, info = collect_and_write(env, collect, base.seed, dataset.root, "train", index, driver)
+                added = usable(dataset.add(meta, info), min_frames)
+                done += added
+                bar.update(added)
             index += 1
     finally:
         bar.close()
-        if env is not None:
-            env.close()
+        env.close()
     return dataset
 
 
@@ -199,11 +193,6 @@ def run(out: Path, setup: Setup) -> int:
     return 0
 
 
-def _summary(folder: Path) -> dict[str, Any] | None:
-    path = folder / "summary.json"
-    return json.loads(path.read_text())["summary"] if path.is_file() else None
-
-
 def table(out: Path, setup: Setup, baseline: Path | None = None) -> str:
     """Markdown: each model's distance to the first collision (mean over seeds, 95 % interval with 2 or
     more) and ends reached, per round; with `baseline` (a sweep folder of the base's data) the
@@ -218,7 +207,7 @@ def table(out: Path, setup: Setup, baseline: Path | None = None) -> str:
                  for net, name in NAMES.items()]
     lines = ["| model | seeds | to first collision (m) | ends reached /20 |", "|---|---|---|---|"]
     for name, folders in rows:
-        found = [s for s in map(_summary, folders) if s is not None]
+        found = [s for s in map(evaluation_summary, folders) if s is not None]
         if found:
             ends = sum(s["reached_end"] for s in found) / len(found)
             d2c = [s["distance_to_collision_mean"] for s in found]

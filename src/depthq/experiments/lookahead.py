@@ -16,10 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
 
-from depthq.configio import read_json
-from depthq.experiments.cells import mean_interval
+from depthq.experiments.cells import evaluation_summary, mean_interval
 
 SIZES, SEEDS, K = (200, 500), (0, 1, 2), 3
 NETS = (  # label, folder argument index, model name pattern
@@ -34,11 +32,6 @@ METRICS = (
 )
 
 
-def _summary(folder: Path, name: str) -> dict[str, Any] | None:
-    path = folder / "eval" / name / "summary.json"
-    return read_json(path)["summary"] if path.is_file() else None
-
-
 def table(folders: tuple[Path, Path], sizes: tuple[int, ...] = SIZES, seeds: tuple[int, ...] = SEEDS) -> str:
     """Markdown: each network and size over `seeds` (the sweep folders of K = 1 and of the lookahead),
     then the lookahead's difference from the one-step net, paired by seed."""
@@ -47,7 +40,8 @@ def table(folders: tuple[Path, Path], sizes: tuple[int, ...] = SIZES, seeds: tup
     per = {}
     for n in sizes:
         for label, which, pattern in NETS:
-            found = {s: m for s in seeds if (m := _summary(folders[which], pattern.format(n=n, s=s)))}
+            evals = folders[which] / "eval"
+            found = {s: m for s in seeds if (m := evaluation_summary(evals / pattern.format(n=n, s=s)))}
             per[label, n] = found
             cells = [mean_interval([m[key] for m in found.values()], fmt, len(seeds))
                      for key, _, fmt in METRICS]
