@@ -9,6 +9,37 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 # imported (it reads the mode once per process): the two-node test's driver must join with it.
 os.environ.setdefault("RAY_AUTH_MODE", "token")
 
+# Under pytest-xdist (the default, `-n auto` in pyproject.toml) each worker's tests get their own
+# share of the cores, as every long job here is pinned: torch sizes its thread pool to the affinity
+# (`depthq.parallel.cores`), and two pools spinning on the same cores run several times slower.
+# A Ray test gets every core: the Ray nodes and workers it starts are processes of its own, which
+# inherit the affinity they are started with.
+_ALL_CPUS = sorted(os.sched_getaffinity(0))
+_MY_CPUS = _ALL_CPUS
+if "PYTEST_XDIST_WORKER" in os.environ:
+    _index, _count = int(os.environ["PYTEST_XDIST_WORKER"][2:]), int(os.environ["PYTEST_XDIST_WORKER_COUNT"])
+    if _count <= len(_ALL_CPUS):
+        _MY_CPUS = _ALL_CPUS[_index::_count]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Before any of a test's fixtures: the cores it may use (see `_MY_CPUS`)."""
+    os.sched_setaffinity(0, _ALL_CPUS if item.get_closest_marker("ray") else _MY_CPUS)
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """`-n auto`: one worker per core this process may use (not the machine's count)."""
+    return len(os.sched_getaffinity(0))
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The tests that start Ray run in one worker, one after another (`--dist loadgroup`): a second
+    Ray runtime on the same machine would compete for its ports and temp folders."""
+    for item in items:
+        if item.get_closest_marker("ray"):
+            item.add_marker(pytest.mark.xdist_group("ray"))
+
 
 @pytest.fixture(scope="session")
 def smoke(tmp_path_factory):
