@@ -8,6 +8,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 # Ray's token authentication, as Ray itself turns on for a cluster started here, set before Ray is
 # imported (it reads the mode once per process): the two-node test's driver must join with it.
 os.environ.setdefault("RAY_AUTH_MODE", "token")
+# Ray starts its workers at niceness 15; beside another pytest-xdist worker's tests they would wait
+# for the core (the two-node test took 7 min instead of 1): here they run at the tests' own priority.
+os.environ.setdefault("RAY_worker_niceness", "0")
 
 # Under pytest-xdist (the default, `-n auto` in pyproject.toml) each worker's tests get their own
 # share of the cores, as every long job here is pinned: torch sizes its thread pool to the affinity
