@@ -156,5 +156,5 @@ def test_the_floor_labeller_learns_from_real_frames_and_labels_its_own_family(
 
 
 def test_a_labeller_method_must_be_one_it_knows() -> None:
-    with pytest.raises(ConfigError, match="monodepth"):
-        LabellerConfig(data="data", method="monodepth")
+    with pytest.raises(ConfigError, match="stereo"):
+        LabellerConfig(data="data", method="stereo")

@@ -5,6 +5,7 @@ against the sweep's own Depth-Q-Net (LiDAR labels) and Coll-Q-Net (the bump), al
 canyons, per canyon family and labeller.
 
     python -m depthq.experiments.camera_labels run SWEEP OUT --method floor [--runs 500] [--seeds 0,1]
+    python -m depthq.experiments.camera_labels run SWEEP OUT --method monodepth [--runs 500] [--seeds 0,1]
     python -m depthq.experiments.camera_labels run SWEEP OUT --method perception --labeller-data OTHER/data
     python -m depthq.experiments.camera_labels table OUT [OUT2 ...] [--runs 500] [--seeds 0,1]
 
@@ -23,11 +24,11 @@ OUT holds one sweep's experiment, every labeller's beside the others:
     OUT/<method>/eval/depth_n<N>_s<S>/    their evaluations (their own default weights, no video)
     OUT/lidar/eval/<net>_n<N>_s<S>/   the sweep's own Depth-Q-Net and Coll-Q-Net in the same canyons
 
-The labellers: `floor` (camera and odometry only: learns on the dataset it labels, SWEEP/data by
-default) and `perception` (learns on ANOTHER canyon family's LiDAR, `--labeller-data`: a stand-in for
-an off-the-shelf depth model). Every step is skipped when its output is complete (a labeller folder
-with its config.json, runs already labelled, stats.json, a checkpoint at its last epoch, an
-evaluation with its summary.json), so the same command resumes. `table` prints the Markdown table;
+The labellers: `floor` and `monodepth` (camera and odometry only: learn on the dataset they label,
+SWEEP/data by default) and `perception` (learns on ANOTHER canyon family's LiDAR, `--labeller-data`:
+a stand-in for an off-the-shelf depth model). Every step is skipped when its output is complete (a
+labeller folder with its config.json, runs already labelled, stats.json, a checkpoint at its last
+epoch, an evaluation with its summary.json), so the same command resumes. `table` prints the Markdown table;
 evaluations of the sweep's models it lacks are driven first. Nothing here pins cores (the caller's
 `taskset` does).
 """
@@ -61,8 +62,15 @@ from depthq.pipeline.sweep import parse_ints, parse_setting
 from depthq.sim.canyon import PAPER
 from depthq.train.config import TrainConfig
 from depthq.train.folder import saved_epoch
+from depthq.train.labeller import (
+    CAMERA_METHODS,
+    METHODS,
+    LabellerConfig,
+    label_dataset,
+    load_labeller,
+    train_labeller,
+)
 from depthq.train.labeller import CONFIG as LABELLER_CONFIG
-from depthq.train.labeller import METHODS, LabellerConfig, label_dataset, load_labeller, train_labeller
 from depthq.train.trainer import train
 
 PROG = "python -m depthq.experiments.camera_labels"
@@ -307,8 +315,8 @@ def _labeller_name(folder: Path) -> str:
     if not path.is_file():
         return folder.name
     record = read_json(path)
-    if record["name"] == "floor":
-        return "floor (camera + odometry)"
+    if record["name"] in CAMERA_METHODS:
+        return f"{record['name']} (camera + odometry)"
     return f"perception (learnt on the {record['source']['family']} family's LiDAR)"
 
 
@@ -403,11 +411,11 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("sweep", type=Path, help="a sweep folder (`depthq sweep` / `depthq reproduce`)")
     go.add_argument("out", type=Path, help="this sweep's experiment folder (created; resumed)")
     go.add_argument("--method", required=True, choices=METHODS,
-                    help="floor: camera and odometry only, learnt on the dataset it labels; perception: "
-                         "learnt on another canyon family's LiDAR (--labeller-data)")
+                    help="floor, monodepth: camera and odometry only, learnt on the dataset it labels; "
+                         "perception: learnt on another canyon family's LiDAR (--labeller-data)")
     go.add_argument("--labeller-data", type=Path, default=None,
                     help="the dataset the labeller learns on: perception, ANOTHER family's (e.g. "
-                         "OTHER_SWEEP/data); floor: default SWEEP/data")
+                         "OTHER_SWEEP/data); floor, monodepth: default SWEEP/data")
     go.add_argument("--canyons", default=None, help=canyons_help)
     go.add_argument("--time-limit", type=float, default=None,
                     help="seconds per evaluation run (default: the canyons' family's)")

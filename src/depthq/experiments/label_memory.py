@@ -1,12 +1,12 @@
-"""How long the floor labeller should remember (issue #32): a dataset's runs labelled by one floor
-labeller at several memory lengths (`LabellerConfig.memory_s`), each rated against the LiDAR as
-`depthq dataset stats` rates labels (nearest bin, distance bands). Choose on `val` runs.
+"""How long a camera labeller should remember (issue #32): a dataset's runs labelled by one floor or
+monodepth labeller at several memory lengths (`LabellerConfig.memory_s`), each rated against the LiDAR
+as `depthq dataset stats` rates labels (nearest bin, distance bands). Choose on `val` runs.
 
     python -m depthq.experiments.label_memory LABELLER DATA [--memory 0,0.5,1,2,4] [--split val]
 
-LABELLER is a floor labeller folder (`depthq labeller --method floor`); DATA a simulated dataset of
-its camera (its LiDAR is the truth here; nothing is written into it). Each frame's own readings are
-computed once; only the memory differs between the rows.
+LABELLER is a floor or monodepth labeller folder (`depthq labeller --method floor|monodepth`); DATA a
+simulated dataset of its camera (its LiDAR is the truth here; nothing is written into it). Each frame's
+own readings are computed once; only the memory differs between the rows.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
 from depthq.errors import ConfigError
 from depthq.experiments.cli import guarded
-from depthq.train import floor
+from depthq.train import floor, monodepth
 from depthq.train.labeller import check_applicable, load_labeller
 
 PROG = "python -m depthq.experiments.label_memory"
@@ -35,8 +35,9 @@ def measure(labeller: Path, dataset: Dataset, memories: tuple[float, ...], split
     """Per memory length (s), `label_errors` of the labeller's bins against the LiDAR's on `split`."""
     loaded = load_labeller(labeller)
     estimate = loaded.estimate
-    if not isinstance(estimate, floor.FloorEstimate):
-        raise ConfigError(f"{labeller}: a {loaded.record['name']} labeller has no memory (a floor one has)")
+    if not isinstance(estimate, floor.FloorEstimate | monodepth.MonodepthEstimate):
+        raise ConfigError(f"{labeller}: a {loaded.record['name']} labeller has no memory (a floor or "
+                          "monodepth one has)")
     check_applicable(loaded, dataset)
     if any(not 0 <= m < np.inf for m in memories):
         raise ConfigError(f"--memory: lengths must be finite seconds >= 0, got {list(memories)}")
@@ -74,7 +75,8 @@ def table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
-    parser.add_argument("labeller", type=Path, help="a floor labeller folder (`depthq labeller`)")
+    parser.add_argument("labeller", type=Path,
+                        help="a floor or monodepth labeller folder (`depthq labeller`)")
     parser.add_argument("data", type=Path, help="a simulated dataset of the labeller's camera")
     parser.add_argument("--memory", default="0,0.5,1,2,4",
                         help="memory lengths to compare, s, comma-separated (default: 0,0.5,1,2,4)")

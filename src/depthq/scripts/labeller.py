@@ -1,5 +1,5 @@
 """Train a camera labeller (a frame → its 26 depth bins) for `depthq label`: from the camera and odometry
-(floor), or from another canyon family's LiDAR (perception)."""
+(floor, monodepth), or from another canyon family's LiDAR (perception)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from depthq.configio import read_json
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 
-_HELP = {"data": "dataset folder it learns from: floor, its camera and odometry (may be the one to label); "
-                 "perception, its LiDAR (ANOTHER canyon family than those to label)"}
+_HELP = {"data": "dataset folder it learns from: floor and monodepth, its camera and odometry (may be the "
+                 "one to label); perception, its LiDAR (ANOTHER canyon family than those to label)"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -24,15 +24,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.train.labeller import CONFIG, LabellerConfig, train_labeller
+    from depthq.train.labeller import CAMERA_METHODS, CONFIG, LabellerConfig, train_labeller
 
     config = config_from_args(LabellerConfig, args)
     out = train_labeller(config, args.out, progress=not args.no_progress, device=args.device)
     record = read_json(out / CONFIG)
     family = record["source"]["family"]
-    if record["name"] == "floor":
-        print(f"labeller: {out} (floor, fingerprint {record['fingerprint'][:16]}…), learnt from the "
-              f"{family!r} family's camera and odometry; training loss {record['losses'][0]:.3f} → "
+    if record["name"] in CAMERA_METHODS:
+        print(f"labeller: {out} ({record['name']}, fingerprint {record['fingerprint'][:16]}…), learnt from "
+              f"the {family!r} family's camera and odometry; training loss {record['losses'][0]:.3f} → "
               f"{record['losses'][-1]:.3f}, val loss {record['val_loss']:.3f}")
         print(f"label a dataset of this camera with: depthq label DATA --from camera --labeller {out}")
     else:

@@ -77,13 +77,19 @@ class Geometry:
     def ranges(self, foot_rows: np.ndarray) -> np.ndarray:
         """Per frame, the obstacle's foot row in every column (N, columns), continuous → the LiDAR's
         readings from +first_bearing° down (N, n_readings), m, clipped at the bins' clip."""
-        rows, cols = self.shape
-        bearings = np.deg2rad(self.bins.first_bearing - np.arange(self.bins.n_readings))
-        u = np.clip(cols / 2 - self.focal * np.tan(bearings), 0, cols - 1e-6)
-        below = np.take(foot_rows, u.astype(int), axis=1) - rows / 2  # rows under the horizon
+        bearings, columns = self.bearing_columns()
+        below = np.take(foot_rows, columns, axis=1) - self.shape[0] / 2  # rows under the horizon
         with np.errstate(divide="ignore"):
             forward = np.where(below > 0, self.focal * self.camera.mount_height / below, np.inf)
         return np.minimum(forward / np.cos(bearings), self.bins.clip).astype(np.float32)
+
+    def bearing_columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """The LiDAR's readings' bearings (n_readings,), rad, from +first_bearing° down, and the reduced
+        frame's column each falls in (n_readings,) int."""
+        cols = self.shape[1]
+        bearings = np.deg2rad(self.bins.first_bearing - np.arange(self.bins.n_readings))
+        u = np.clip(cols / 2 - self.focal * np.tan(bearings), 0, cols - 1e-6)
+        return bearings, u.astype(int)
 
     def bins_of(self, readings: np.ndarray) -> np.ndarray:
         """Readings (N, n_readings) → depth bins (N, n_bins): placed in a scan at their bearings, then
@@ -119,6 +125,14 @@ def remember(readings: np.ndarray, poses: np.ndarray, times: np.ndarray, geo: Ge
             inside = (index >= 0) & (index < geo.bins.n_readings)
             np.minimum.at(fused[t], index[inside], np.hypot(dx, dy)[inside].astype(np.float32))
     return fused
+
+
+def remembered_bins(readings: np.ndarray, run: Run, geo: Geometry, memory_s: float) -> np.ndarray:
+    """A run's own readings (N, n_readings) → its bins (N, n_bins) float32, with a memory of `memory_s` s
+    (0: none)."""
+    if memory_s:
+        readings = remember(readings, run.poses, run.times, geo, memory_s)
+    return geo.bins_of(readings)
 
 
 def geometry(env: dict[str, Any] | None, scale: int) -> Geometry:
@@ -251,9 +265,7 @@ class FloorEstimate:
 
     def bins(self, readings: np.ndarray, run: Run, memory_s: float) -> np.ndarray:
         """A run's own readings → its bins (N, n_bins) float32, with a memory of `memory_s` s (0: none)."""
-        if memory_s:
-            readings = remember(readings, run.poses, run.times, self.geo, memory_s)
-        return self.geo.bins_of(readings)
+        return remembered_bins(readings, run, self.geo, memory_s)
 
     @torch.inference_mode()
     def readings(self, frames: np.ndarray) -> np.ndarray:

@@ -5,7 +5,9 @@ frozen default trunk's feature → FC hidden + ReLU → FC 26, the read-out of t
 `perceive`, trained with an L1 loss on the current LiDAR bins of a dataset of ANOTHER canyon family
 (an invalid bin as the 2 m clip, as that head's perception target). It used a depth sensor, elsewhere:
 no depth of the canyons it labels. Applied to a dataset (`depthq label`), it writes every frame's 26
-bins, clipped to [0, 2] m, into the run files (`depthq.data.camera_labels`).
+bins, clipped to [0, 2] m, into the run files (`depthq.data.camera_labels`). The floor labeller
+(`depthq.train.floor`) and the monodepth labeller (`depthq.train.monodepth`) learn from the camera and
+odometry alone instead; their folders have the same files, with their own settings (docs/formats.md).
 
 Its folder (written by `depthq labeller`):
 
@@ -47,7 +49,7 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
 from depthq.sim.sensors import BinConfig
-from depthq.train import floor
+from depthq.train import floor, monodepth
 from depthq.train.features import BATCH, FeatureTable, load_features
 
 FORMAT = "depthq-labeller"
@@ -57,21 +59,27 @@ WEIGHTS = "weights.safetensors"
 LOG_BLOCKS = 10  # the training loss is recorded as the mean over each tenth of the steps
 
 
-METHODS = ("floor", "perception")
-# The method's defaults of the settings a LabellerConfig leaves None: (steps, batch_size, lr).
-_DEFAULTS = {"floor": (600, 8, 1e-3), "perception": (4000, 64, 0.1)}
+METHODS = ("floor", "perception", "monodepth")
+# The method's defaults of the settings a LabellerConfig leaves None: (scale, steps, batch_size, lr);
+# perception uses no scale (its records hold the 2 they always held).
+_DEFAULTS = {"floor": (2, 600, 8, 1e-3), "perception": (2, 4000, 64, 0.1), "monodepth": (4, 1500, 8, 1e-3)}
+# The methods that learn from the camera and odometry alone and read distances through the camera's
+# geometry: they may label the dataset they learnt on, one of the same camera and robot.
+CAMERA_METHODS = ("floor", "monodepth")
 
 
 @dataclass(frozen=True)
 class LabellerConfig:
     """One labeller training on `data` (docs/design.md#camera-labels)."""
 
-    # The dataset it learns from: for "floor" its camera and odometry (it may be the dataset to label);
-    # for "perception" its LiDAR (another canyon family's than the datasets it will label).
+    # The dataset it learns from: for "floor" and "monodepth" its camera and odometry (it may be the
+    # dataset to label); for "perception" its LiDAR (another canyon family's than the datasets it will
+    # label).
     data: str
     # How a frame becomes bins: "floor" (camera and odometry only: where the floor ends, learnt from the
-    # robot's future footprint) or "perception" (a read-out of the trunk's feature learnt on another
-    # family's LiDAR: a stand-in for an off-the-shelf depth model).
+    # robot's future footprint), "perception" (a read-out of the trunk's feature learnt on another
+    # family's LiDAR: a stand-in for an off-the-shelf depth model) or "monodepth" (camera and odometry
+    # only: a depth net learnt by warping each frame's neighbours into it, Monodepth2's self-supervision).
     method: str = "floor"
     # perception: a frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
     trunk: str = DEFAULT_TRUNK
@@ -79,9 +87,10 @@ class LabellerConfig:
     input_size: int = INPUT_SIZE
     # perception: width of the read-out's hidden layer (the depth-first head's).
     hidden: int = 4096
-    # floor: frames are box-averaged by this factor before the floor net (2: 205 × 154 pixels).
-    scale: int = 2
-    # floor: channels of the floor net's layers.
+    # floor, monodepth: frames are box-averaged by this factor before the net (2: 205 × 154 pixels);
+    # none: the method's (floor 2; monodepth 4, 102 × 77: its loss warps every frame at four scales).
+    scale: int | None = None
+    # floor: channels of the floor net's layers; monodepth: of the depth net's first level.
     width: int = 16
     # floor: the context branch, the colours of the floor ahead shifting the first layer (what floor looks
     # like differs canyon by canyon in the hard family's randomised look).
@@ -90,18 +99,29 @@ class LabellerConfig:
     lookahead: int = 12
     # floor: floor nearer than this (m ahead of the camera) is neither learnt nor judged.
     nearest: float = 0.3
-    # floor: each frame's readings fused with those of the frames of the last memory_s seconds, moved
-    # by odometry (nearest wins): obstacles lost close up stay where earlier frames saw them; 0: off.
+    # floor, monodepth: each frame's readings fused with those of the frames of the last memory_s
+    # seconds, moved by odometry (nearest wins): obstacles lost close up stay where earlier frames saw
+    # them; 0: off.
     memory_s: float = 2.0
-    # floor: random frames of each training run in the training pool (held in memory, reduced).
+    # floor, monodepth: random frames of each training run in the training pool (held in memory,
+    # reduced; monodepth: each with its two neighbours).
     pool_frames: int = 6
-    # floor: the first training runs whose frames make the pool.
+    # floor, monodepth: the first training runs whose frames make the pool.
     pool_runs: int = 300
-    # Optimiser steps; none: the method's (floor 600, perception 4000 = a training's 40 × 100).
+    # monodepth: the nearest depth the net can predict, m.
+    min_depth: float = 0.1
+    # monodepth: the farthest depth the net can predict, m: beyond the bins' clip, as the floor and the
+    # walls down the canyon are (capped at the clip, they would warp wrongly).
+    max_depth: float = 10.0
+    # monodepth: weight of the edge-aware smoothness of the disparity against the photometric error.
+    smoothness: float = 1e-3
+    # Optimiser steps; none: the method's (floor 600, perception 4000 = a training's 40 × 100,
+    # monodepth 1500).
     steps: int | None = None
-    # Frames per step; none: the method's (floor 8, perception 64).
+    # Frames per step; none: the method's (floor 8, perception 64, monodepth 8 triplets).
     batch_size: int | None = None
-    # Learning rate; none: the method's (floor: Adam's 1e-3; perception: Adadelta's 0.1, the heads').
+    # Learning rate; none: the method's (floor, monodepth: Adam's 1e-3; perception: Adadelta's 0.1,
+    # the heads').
     lr: float | None = None
     # Seeds the initialisation, the pool and the batches.
     seed: int = 0
@@ -115,7 +135,7 @@ class LabellerConfig:
         if spec is None or not spec.frozen:
             frozen = sorted(name for name, s in TRUNKS.items() if s.frozen)
             raise ConfigError(f"labeller.trunk must be a frozen trunk, one of {frozen}, got {self.trunk!r}")
-        for name, value in zip(("steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
+        for name, value in zip(("scale", "steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
         for name, low in (("input_size", 1), ("hidden", 1), ("scale", 1), ("width", 1), ("lookahead", 1),
@@ -123,13 +143,19 @@ class LabellerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ConfigError(f"labeller.{name} must be an integer >= {low}, got {value!r}")
-        for name in ("lr", "nearest"):
+        for name in ("lr", "nearest", "min_depth", "max_depth"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value < np.inf:
                 raise ConfigError(f"labeller.{name} must be a finite number > 0, got {value!r}")
         m = self.memory_s
         if isinstance(m, bool) or not isinstance(m, int | float) or not 0 <= m < np.inf:
             raise ConfigError(f"labeller.memory_s must be a finite number of seconds >= 0, got {m!r}")
+        if not self.min_depth < self.max_depth:
+            raise ConfigError(f"labeller.max_depth must be above min_depth {self.min_depth!r}, got "
+                              f"{self.max_depth!r}")
+        w = self.smoothness
+        if isinstance(w, bool) or not isinstance(w, int | float) or not 0 <= w < np.inf:
+            raise ConfigError(f"labeller.smoothness must be a finite number >= 0, got {w!r}")
 
 
 class Perception(nn.Module):
@@ -204,6 +230,11 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
         net, losses, val = floor.train(dataset, geo, config, progress, device)
         identity = floor.identity(config, floor.geometry_record(geo), bins)
         results = {"val_loss": round(val, 6)}
+    elif config.method == "monodepth":
+        geo = floor.geometry(dataset.config.get("env"), config.scale)
+        net, losses, val = monodepth.train(dataset, geo, config, progress, device)
+        identity = monodepth.identity(config, floor.geometry_record(geo), bins)
+        results = {"val_loss": round(val, 6)}
     else:
         net, losses, val = _train_perception(dataset, config, progress, device)
         identity = _identity(config.trunk, config.input_size, bins)
@@ -275,6 +306,9 @@ def load_labeller(folder: Path) -> Labeller:
     if config.method == "floor":
         net: nn.Module = floor.FloorNet(config.width, config.context)
         identity = floor.identity(config, record["geometry"], record["bins"])
+    elif config.method == "monodepth":
+        net = monodepth.DepthNet(config.width)
+        identity = monodepth.identity(config, record["geometry"], record["bins"])
     else:
         net = Perception(TRUNKS[config.trunk].feature_dim, config.hidden, int(record["n_bins"]))
         identity = _identity(config.trunk, config.input_size, record["bins"])
@@ -283,9 +317,13 @@ def load_labeller(folder: Path) -> Labeller:
     except RuntimeError as err:
         raise ConfigError(f"{folder / WEIGHTS}: weights do not fit its {CONFIG} ({err})") from err
     net.eval()
-    if config.method == "floor":
+    if config.method in CAMERA_METHODS:
         geo = floor.geometry(floor.env_of(record["geometry"], record["bins"]), config.scale)
+    if config.method == "floor":
         estimate: Callable[[Run], np.ndarray] = floor.FloorEstimate(net, geo, config.nearest, config.memory_s)
+    elif config.method == "monodepth":
+        depths = (config.min_depth, config.max_depth)
+        estimate = monodepth.MonodepthEstimate(net, geo, depths, config.memory_s)
     else:
         estimate = PerceptionEstimate(net, build_trunk(config.trunk), config.input_size)
     return Labeller(estimate, _fingerprint(identity, metadata[DIGEST]), record)
@@ -312,18 +350,19 @@ def _fingerprint(identity: dict[str, Any], weights_digest: str) -> str:
 
 
 def check_applicable(labeller: Labeller, dataset: Dataset) -> None:
-    """ConfigError unless `labeller` may label `dataset`: bins of the same geometry; a floor labeller,
-    the same camera and robot; a perception labeller, learnt on another canyon family (no depth of the
-    canyons it labels; a robot's recording is no canyon family)."""
+    """ConfigError unless `labeller` may label `dataset`: bins of the same geometry; a floor or monodepth
+    labeller, the same camera and robot; a perception labeller, learnt on another canyon family (no
+    depth of the canyons it labels; a robot's recording is no canyon family)."""
     record = labeller.record
     if record["bins"] != bin_geometry(dataset):
         raise ConfigError(f"labeller bins {record['bins']} differ from {dataset.root}'s bins "
                           f"{bin_geometry(dataset)}: its labels would not be in this dataset's geometry")
-    if record["name"] == "floor":
+    if record["name"] in CAMERA_METHODS:
         own = floor.geometry_record(floor.geometry(dataset.config.get("env"), record["scale"]))
         if own != record["geometry"]:
+            what = "floor rows" if record["name"] == "floor" else "depths and odometry"
             raise ConfigError(f"labeller camera and robot {record['geometry']} differ from {dataset.root}'s "
-                              f"{own}: its floor rows would give wrong distances")
+                              f"{own}: its {what} would give wrong distances")
         return
     source, target = record["source"]["family"], dataset.family()
     if source == target:
