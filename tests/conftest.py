@@ -17,9 +17,11 @@ os.environ.setdefault("RAY_worker_niceness", "0")
 # (`depthq.parallel.cores`), and two pools spinning on the same cores run several times slower.
 # A Ray test gets every core: the Ray nodes and workers it starts are processes of its own, which
 # inherit the affinity they are started with.
-_ALL_CPUS = sorted(os.sched_getaffinity(0))
+# (Linux only: elsewhere every test runs where the OS puts it.)
+_PINNED = hasattr(os, "sched_setaffinity")
+_ALL_CPUS = sorted(os.sched_getaffinity(0)) if _PINNED else []
 _MY_CPUS = _ALL_CPUS
-if "PYTEST_XDIST_WORKER" in os.environ:
+if _PINNED and "PYTEST_XDIST_WORKER" in os.environ:
     _index, _count = int(os.environ["PYTEST_XDIST_WORKER"][2:]), int(os.environ["PYTEST_XDIST_WORKER_COUNT"])
     if _count <= len(_ALL_CPUS):
         _MY_CPUS = _ALL_CPUS[_index::_count]
@@ -28,12 +30,13 @@ if "PYTEST_XDIST_WORKER" in os.environ:
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item: pytest.Item) -> None:
     """Before any of a test's fixtures: the cores it may use (see `_MY_CPUS`)."""
-    os.sched_setaffinity(0, _ALL_CPUS if item.get_closest_marker("ray") else _MY_CPUS)
+    if _PINNED:
+        os.sched_setaffinity(0, _ALL_CPUS if item.get_closest_marker("ray") else _MY_CPUS)
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     """`-n auto`: one worker per core this process may use (not the machine's count)."""
-    return len(os.sched_getaffinity(0))
+    return len(_ALL_CPUS) or os.cpu_count() or 1
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
