@@ -46,8 +46,18 @@ from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
 from depthq.experiments.probe import agreement_file, measure_agreement
 from depthq.nets.checkpoint import load_qnet
+from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
-from depthq.pipeline.sweep import Sweep, parse_ints, parse_setting, retarget, widened
+from depthq.pipeline.sweep import (
+    Settings,
+    Sweep,
+    Variant,
+    differing,
+    parse_ints,
+    parse_setting,
+    retarget,
+    widened,
+)
 from depthq.report.findings import FINDINGS, Evidence, record_evidence
 from depthq.report.reproduce import run_sweep
 from depthq.train.features import load_features
@@ -394,19 +404,21 @@ def compare(named: list[tuple[str, Path]]) -> str:
     return "\n".join(lines)
 
 
-PATTERN = "eval/{net}_n{n}_s{seed}"  # a sweep's evaluation of a model
+PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {net}_n{n}_s{seed}…)
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
 
 
-def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
-                   pattern: str = PATTERN) -> dict[int, dict[int, list[dict[str, Any]]]]:
-    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary."""
+def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
+                   variant: Variant = ()) -> dict[int, dict[int, list[dict[str, Any]]]]:
+    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary; of the
+    sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
     results: dict[int, dict[int, list[dict[str, Any]]]] = {}
+    differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
     for n in sizes:
         for seed in seeds:
-            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed) / "summary.json"
-                     for net in ("coll", "depth")]
+            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed, model=model_name(
+                net, n, seed, differs[net])) / "summary.json" for net in ("coll", "depth")]
             if all(f.is_file() for f in found):
                 results.setdefault(n, {})[seed] = [json.loads(f.read_text())["summary"] for f in found]
     return results
@@ -418,14 +430,26 @@ def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[floa
     return coll, depth, [d - c for c, d in zip(coll, depth, strict=True)]
 
 
-def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN) -> str:
+def _sweep_train(sweep: Path) -> Settings:
+    """The training settings every model of a sweep folder has (its setup's, as `Sweep.train`)."""
+    marker = Path(sweep) / "reproduce.json"
+    if not marker.is_file():
+        raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json)")
+    setup = read_json(marker)["sweep"]
+    keys = ("epochs", "train_batches", "val_batches")
+    return tuple((k, setup[k]) for k in keys if setup.get(k) is not None)
+
+
+def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
+           variant: Variant = ()) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
     of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
     trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
-    out of their row. `pattern` names a model's evaluation folder under `sweep`."""
+    out of their row. `pattern` names a model's evaluation folder under `sweep`; `variant`: the
+    sweep's models in it."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
-    for n, both in paired_results(sweep, sizes, seeds, pattern).items():
+    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
         for label, key, fmt in PAIRED:
             cells = [mean_interval(v, fmt) for v in _columns(both, key)]
             lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
@@ -433,12 +457,12 @@ def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern:
 
 
 def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
-                    pattern: str = PATTERN) -> dict[str, str]:
+                    pattern: str = PATTERN, variant: Variant = ()) -> dict[str, str]:
     """The paired comparison in words, one sentence per size, keyed by where it was measured
     ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
     record = read_json(Path(sweep) / "reproduce.json")["sweep"]
     out = {}
-    for n, both in paired_results(sweep, sizes, seeds, pattern).items():
+    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
         coll, depth, diff = _columns(both, "distance_to_collision_mean")
         ahead = sum(d > 0 for d in diff)
         key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
@@ -446,6 +470,12 @@ def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
                     f"{mean_interval(coll, '.2f')} m; Depth-Q-Net ahead in {ahead} of {len(diff)} seeds "
                     f"(paired difference {mean_interval(diff, '.2f')} m)")
     return out
+
+
+def _one(key: str, values: tuple[Any, ...]) -> Any:
+    if len(values) != 1:
+        raise ConfigError(f"--set {key}: one value here, got {len(values)}")
+    return values[0]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -460,7 +490,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", default="",
                         help="run, table: only the candidates whose name contains this text")
     parser.add_argument("--pattern", default=PATTERN,
-                        help="paired: a model's evaluation folder under OUT, from {net}, {n} and {seed}")
+                        help="paired: a model's evaluation folder under OUT, from {model} (the sweep's "
+                             "folder name), {net}, {n} and {seed}")
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                        help="paired: the sweep's models of this variant, as `depthq sweep --set` gave it "
+                             "(one value each; repeatable)")
     parser.add_argument("--figure", type=Path,
                         help="predicts, where: the figure (default OUT/diagnostics.png, OUT/where.png)")
     parser.add_argument("--claim", help="paired: write the comparison as evidence of this claim of the "
@@ -483,10 +517,12 @@ def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
     args.out = Path(args.out)
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
     if args.action == "paired":
-        print(paired(args.out, setup.sizes, setup.seeds, args.pattern))
+        variant = tuple((key, _one(key, values)) for key, values in map(parse_setting, args.set))
+        print(paired(args.out, setup.sizes, setup.seeds, args.pattern, variant))
         if args.claim:
             command = "python -m depthq.experiments.oracle_gap " + " ".join(argv or sys.argv[1:])
-            for key, text in paired_evidence(args.out, setup.sizes, setup.seeds, args.pattern).items():
+            for key, text in paired_evidence(args.out, setup.sizes, setup.seeds, args.pattern,
+                                             variant).items():
                 record_evidence(args.claim, key, Evidence(text, command), args.findings)
                 print(f"{args.findings}: claim {args.claim}, {key}: {text}")
         return 0

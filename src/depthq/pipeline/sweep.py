@@ -134,17 +134,15 @@ class Sweep:
     def models(self) -> list[Model]:
         """Seed-major: an interrupted sweep already holds a whole table for its first seed."""
         # Each network's own settings: a default may differ between them (`TrainConfig.head_form`).
-        first = self.subsets[0], self.seeds[0]
-        own = {net: self.train_config(Model(net, *first), "data") for net in self.nets}
-        models = [
-            Model(net, n, seed, variant)
+        differs = {(net, variant): differing(net, variant, self.train)
+                   for variant in self.variants() for net in self.nets}
+        return [
+            Model(net, n, seed, variant, differs[net, variant])
             for seed in self.seeds
             for variant in self.variants()
             for n in self.subsets
             for net in self.nets
         ]
-        return [replace(m, differs=tuple((k, v) for k, v in m.settings if get_path(own[m.net], k) != v))
-                for m in models]
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
         own = {"model": model.net, "data": data, "runs": model.runs, "seed": model.seed}
@@ -230,6 +228,14 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
     if not values:
         raise ConfigError(f"{what} names no value: {text!r}")
     return tuple(values)
+
+
+def differing(net: str, variant: Variant, train: Settings = ()) -> Variant:
+    """The settings of `variant` that `net` has (`DEPTH_ONLY`) and whose values differ from its own
+    under a sweep's `train` settings: what names its models' folders (`Model.differs`)."""
+    own = build_config(TrainConfig, {"model": net, "data": "data", "runs": 1, "seed": 0} | dict(train))
+    settings = Model(net, 1, 0, variant).settings
+    return tuple((k, v) for k, v in settings if get_path(own, k) != v)
 
 
 def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
