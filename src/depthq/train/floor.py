@@ -252,13 +252,12 @@ def env_of(record: dict[str, Any], bins: dict[str, Any]) -> dict[str, Any]:
     return {"world": record, "bins": bins}
 
 
-class FloorEstimate:
-    """A run → bins (N, n_bins) float32: floor net, foot rows, readings, the memory, bins."""
+class ReadingsEstimate:
+    """A run → bins (N, n_bins) float32 from each frame's own LiDAR-like readings (`readings`, a camera
+    labeller's own), fused by the memory and binned: what the floor and monodepth labellers share."""
 
-    def __init__(self, net: FloorNet, geo: Geometry, nearest: float, memory_s: float = 0.0) -> None:
-        self.net, self.geo, self.nearest, self.memory_s = net, geo, nearest, memory_s
-        # The net sees the rows from a receptive field above the horizon down: those above are no floor.
-        self.top = max(0, int(geo.shape[0] / 2) - RECEPTIVE_RADIUS - 1)
+    geo: Geometry
+    memory_s: float
 
     def __call__(self, run: Run) -> np.ndarray:
         return self.bins(self.readings(run.images), run, self.memory_s)
@@ -266,6 +265,19 @@ class FloorEstimate:
     def bins(self, readings: np.ndarray, run: Run, memory_s: float) -> np.ndarray:
         """A run's own readings → its bins (N, n_bins) float32, with a memory of `memory_s` s (0: none)."""
         return remembered_bins(readings, run, self.geo, memory_s)
+
+    def readings(self, frames: np.ndarray) -> np.ndarray:
+        """uint8 frames (N, H, W, 3) → each frame's own readings (N, n_readings), m."""
+        raise NotImplementedError
+
+
+class FloorEstimate(ReadingsEstimate):
+    """A run → bins (N, n_bins) float32: floor net, foot rows, readings, the memory, bins."""
+
+    def __init__(self, net: FloorNet, geo: Geometry, nearest: float, memory_s: float = 0.0) -> None:
+        self.net, self.geo, self.nearest, self.memory_s = net, geo, nearest, memory_s
+        # The net sees the rows from a receptive field above the horizon down: those above are no floor.
+        self.top = max(0, int(geo.shape[0] / 2) - RECEPTIVE_RADIUS - 1)
 
     @torch.inference_mode()
     def readings(self, frames: np.ndarray) -> np.ndarray:

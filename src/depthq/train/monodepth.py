@@ -36,9 +36,8 @@ from torch import nn
 from tqdm import tqdm
 
 from depthq.data.manifest import Dataset, RunEntry
-from depthq.data.run import Run
 from depthq.errors import DataError
-from depthq.train.floor import BATCH, Geometry, reduce, remembered_bins
+from depthq.train.floor import BATCH, Geometry, ReadingsEstimate, reduce
 
 # The depth net's channels per level, in multiples of its width: its encoder halves the frame's size at
 # each level, and each decoder level gives a disparity, at 1, 1/2, 1/4, 1/8 of the size (Monodepth2's).
@@ -189,19 +188,12 @@ def horizon_depths(depth: np.ndarray, geo: Geometry) -> np.ndarray:
     return np.minimum(z / np.cos(bearings), geo.bins.clip).astype(np.float32)
 
 
-class MonodepthEstimate:
+class MonodepthEstimate(ReadingsEstimate):
     """A run → bins (N, n_bins) float32: depth net, horizon depths, the memory, bins."""
 
     def __init__(self, net: DepthNet, geo: Geometry, depth_range: tuple[float, float], memory_s: float
                  ) -> None:
         self.net, self.geo, self.depth_range, self.memory_s = net, geo, depth_range, memory_s
-
-    def __call__(self, run: Run) -> np.ndarray:
-        return self.bins(self.readings(run.images), run, self.memory_s)
-
-    def bins(self, readings: np.ndarray, run: Run, memory_s: float) -> np.ndarray:
-        """A run's own readings → its bins (N, n_bins) float32, with a memory of `memory_s` s (0: none)."""
-        return remembered_bins(readings, run, self.geo, memory_s)
 
     @torch.inference_mode()
     def readings(self, frames: np.ndarray) -> np.ndarray:
