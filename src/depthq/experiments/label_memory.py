@@ -24,7 +24,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
 from depthq.errors import ConfigError
 from depthq.experiments.cli import guarded
-from depthq.train import floor, monodepth
+from depthq.train import floor
 from depthq.train.labeller import check_applicable, load_labeller
 
 PROG = "python -m depthq.experiments.label_memory"
@@ -35,7 +35,7 @@ def measure(labeller: Path, dataset: Dataset, memories: tuple[float, ...], split
     """Per memory length (s), `label_errors` of the labeller's bins against the LiDAR's on `split`."""
     loaded = load_labeller(labeller)
     estimate = loaded.estimate
-    if not isinstance(estimate, floor.FloorEstimate | monodepth.MonodepthEstimate):
+    if not isinstance(estimate, floor.ReadingsEstimate):
         raise ConfigError(f"{labeller}: a {loaded.record['name']} labeller has no memory (a floor or "
                           "monodepth one has)")
     check_applicable(loaded, dataset)

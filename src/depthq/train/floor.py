@@ -127,14 +127,6 @@ def remember(readings: np.ndarray, poses: np.ndarray, times: np.ndarray, geo: Ge
     return fused
 
 
-def remembered_bins(readings: np.ndarray, run: Run, geo: Geometry, memory_s: float) -> np.ndarray:
-    """A run's own readings (N, n_readings) → its bins (N, n_bins) float32, with a memory of `memory_s` s
-    (0: none)."""
-    if memory_s:
-        readings = remember(readings, run.poses, run.times, geo, memory_s)
-    return geo.bins_of(readings)
-
-
 def geometry(env: dict[str, Any] | None, scale: int) -> Geometry:
     """A dataset's geometry from its env record (a robot's recording, resampled to the defaults: None)."""
     if env is None:
@@ -264,7 +256,9 @@ class ReadingsEstimate:
 
     def bins(self, readings: np.ndarray, run: Run, memory_s: float) -> np.ndarray:
         """A run's own readings → its bins (N, n_bins) float32, with a memory of `memory_s` s (0: none)."""
-        return remembered_bins(readings, run, self.geo, memory_s)
+        if memory_s:
+            readings = remember(readings, run.poses, run.times, self.geo, memory_s)
+        return self.geo.bins_of(readings)
 
     def readings(self, frames: np.ndarray) -> np.ndarray:
         """uint8 frames (N, H, W, 3) → each frame's own readings (N, n_readings), m."""

@@ -55,9 +55,8 @@ MIN_MOVE = 0.02
 # obstacles that earlier frames saw nearer are kept by the memory, which takes the nearest.
 HORIZON_ROWS = 2
 # m: the depth the net starts at everywhere. Far, not Monodepth2's sigmoid(0) (0.2 m here): in the
-# canyons' flat-shaded faces the photometric error has a gradient only within a pixel of an edge; in a
-# short trial on hard-family frames, from a near start the net put every horizon beyond the clip, from
-# a far one it found walls.
+# canyons' flat-shaded faces the photometric error has a gradient only within a pixel of an edge, and
+# from a near start the net can settle with every horizon beyond the clip (docs/design.md#camera-labels).
 START_DEPTH = 3.0
 
 
