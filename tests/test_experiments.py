@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from depthq.errors import ConfigError
-from depthq.experiments import oracle_gap, privileged
+from depthq.experiments import oracle_gap, privileged, training_length
 from depthq.report.findings import FINDINGS, read_findings
 
 
@@ -102,3 +102,36 @@ def test_privileged_input_trains_on_the_lidar_and_drives_without_a_camera(
     assert "| Depth-Q-Net | the current 26 bins (LiDAR) | None | 0 |" in privileged.table([tmp_path])
     with pytest.raises(ConfigError, match="privileged input"):
         privileged.run(small_dataset, tmp_path, ("image",), ("depth",), "val:1000", runs=None)
+
+
+@pytest.mark.slow
+def test_training_length_drives_every_snapshot_beside_its_validation_loss(
+    smoke: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "length"
+    shutil.copytree(smoke, out)
+    setup = oracle_gap.Setup(preset="smoke", canyons=None, runs=6, sizes=(6,), seeds=(0,))
+    assert training_length.run(out, setup, 3, (1,)) == 0
+    model = "depth_n6_s0_epochs3_snapshots1"
+    assert (out / "models" / model / "epoch_0001.safetensors").is_file()
+    points = training_length.rows(out, setup, 3, (1,))
+    assert [p["epoch"] for p in points] == [1, 3]
+    with (out / "models" / model / "metrics.csv").open() as f:
+        losses = [float(line.split(",")[2]) for line in f.read().splitlines()[1:]]
+    assert [p["val_loss"] for p in points] == pytest.approx([losses[0], losses[2]])
+    for point, name in zip(points, (f"{model}_epoch1", model), strict=True):
+        written = json.loads((out / "eval" / name / "summary.json").read_text())
+        assert point["distance_to_collision_mean"] == written["summary"]["distance_to_collision_mean"]
+        assert written["config"]["weights"] == (None if name == model else f"epoch:{point['epoch']}")
+        assert 0 <= point["agreement"] <= 1
+    assert points[0]["val_loss"] != points[1]["val_loss"]
+    stamp = (out / training_length.MEASURED).stat().st_mtime_ns
+    assert training_length.run(out, setup, 3, (1,)) == 0  # resumed: nothing measured twice
+    assert (out / training_length.MEASURED).stat().st_mtime_ns == stamp
+    rows = training_length.table(points).splitlines()
+    assert len(rows) == 4 and rows[3].startswith(f"| 0 | 3 | {points[1]['val_loss']:.4f} | ")
+    training_length.plot(points, out / "length.png")
+    assert (out / "length.png").stat().st_size > 5000
+    with pytest.raises(ConfigError, match="snapshots"):
+        training_length.run(out, setup, 3, (3,))
+    assert training_length.main(["table", str(tmp_path / "nowhere")]) == 2

@@ -181,8 +181,9 @@ def _checkpoint_policy(summary: dict[str, Any]) -> Any:
         raise ConfigError(f"predictions need a checkpoint's evaluation; {described.get('policy')!r} is none")
     selection = Selection(config.get("rule", "discounted_nearest_bin"), config.get("discount", 0.9),
                           config.get("switch", False))
-    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), weights=described.get("weights"),
-                                      selection=selection)
+    # the evaluation's own request ('epoch:40'); without one, the weights the policy chose ('best', 'last')
+    weights = config.get("weights") or described.get("weights")
+    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), weights=weights, selection=selection)
 
 
 def _obstacle_kind(canyon: Canyon, xy: np.ndarray) -> str:

@@ -1,0 +1,168 @@
+"""Driving against training length (docs/hard_canyons.md#training-length): one model of an oracle-gap
+folder trained for the paper's 200 epochs with snapshots, every snapshot driven in the setup's `val`
+canyons beside its validation loss and its agreement with the one-step oracle along its own runs.
+Asks where, between the default's 40 epochs and the paper's 200, the driving turns, and what changes
+with it.
+
+    python -m depthq.experiments.training_length run OUT [--seeds 0] [--epochs 200] \\
+        [--snapshots 20,40,80,120,160] [--net depth] [--figure PATH]
+
+OUT is a `python -m depthq.experiments.oracle_gap run` folder (its dataset and canyons; the training is
+its sweep's, `--set epochs=… --set snapshots=…`). The final weights are the sweep's own evaluation
+(OUT/eval/<model>), each snapshot's is OUT/eval/<model>_epoch<N>; the agreements go to
+OUT/training_length.json (each evaluation measured once). The `eval` canyons are never driven here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from depthq.configio import read_json, write_json
+from depthq.errors import ConfigError
+from depthq.evaluate.online import evaluate
+from depthq.evaluate.oracle import Oracle
+from depthq.experiments.cells import evaluation_summary
+from depthq.experiments.cli import guarded
+from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
+from depthq.experiments.probe import measure_agreement
+from depthq.pipeline.sweep import parse_ints
+from depthq.report.reproduce import run_sweep
+
+PROG = "python -m depthq.experiments.training_length"
+MEASURED = "training_length.json"
+COLUMNS = (  # the table's diagnostics: title, key of the agreement summary, format
+    ("agrees, decisive", "agreement_decisive", ".0%"),
+    ("agrees, last 2 s", "agreement_before_collision", ".0%"),
+    ("score error (m)", "score_error", ".3f"),
+    ("predicted spread (m)", "predicted_spread", ".3f"),
+)
+
+
+def candidate(epochs: int, snapshots: tuple[int, ...], net: str = "depth") -> Candidate:
+    """The sweep variant that trains `epochs` and keeps the `snapshots`' weights."""
+    kept = "+".join(map(str, snapshots))
+    return Candidate(f"{epochs} epochs", (f"epochs={epochs}", f"snapshots={kept}"), net)
+
+
+def _points(model: str, epochs: int, snapshots: tuple[int, ...]) -> list[tuple[int, str, str | None]]:
+    """(epoch, evaluation folder name, weights) for every snapshot, then the final weights."""
+    return [(e, f"{model}_epoch{e}", f"epoch:{e}") for e in snapshots] + [(epochs, model, None)]
+
+
+def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth",
+        workers: int = 1) -> int:
+    """Per seed: the sweep's training and final evaluation, each snapshot's evaluation, and every
+    evaluation's agreement with the one-step oracle (resumed: what exists is kept)."""
+    if not snapshots or max(snapshots) >= epochs:
+        raise ConfigError(f"snapshots {snapshots} must be epochs before the last ({epochs})")
+    chosen = candidate(epochs, snapshots, net)
+    for seed in setup.seeds:
+        sweep = sweep_of(setup, chosen, (seed,))
+        run_sweep(sweep, out)
+        (model,) = (m.name for m in sweep.models())
+        for epoch, name, weights in _points(model, epochs, snapshots):
+            folder = out / "eval" / name
+            if weights is not None and evaluation_summary(folder) is None:
+                print(f"{out}: {model} at epoch {epoch}", flush=True)
+                evaluate(str(out / "models" / model), folder, replace(sweep.eval_config(), weights=weights),
+                         workers=workers, video=False)
+            path = out / MEASURED
+            measured: dict[str, Any] = read_json(path) if path.is_file() else {}
+            if name not in measured:
+                measured[name] = measure_agreement(folder, Oracle(), out / "probe", predictions=True)
+                write_json(path, measured)
+    return 0
+
+
+def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth"
+         ) -> list[dict[str, Any]]:
+    """Every finished point: seed, epoch, validation loss, driving and the diagnostic's measures."""
+    measured = read_json(out / MEASURED) if (out / MEASURED).is_file() else {}
+    found = []
+    for seed in setup.seeds:
+        (model,) = (m.name for m in sweep_of(setup, candidate(epochs, snapshots, net), (seed,)).models())
+        metrics = out / "models" / model / "metrics.csv"
+        if not metrics.is_file():
+            continue
+        with metrics.open() as f:
+            val_loss = {int(r["epoch"]): float(r["val_loss"]) for r in csv.DictReader(f)}
+        for epoch, name, _ in _points(model, epochs, snapshots):
+            summary = evaluation_summary(out / "eval" / name)
+            if summary is not None and name in measured:
+                found.append({"seed": seed, "epoch": epoch, "val_loss": val_loss[epoch], **measured[name],
+                              "distance_to_collision_mean": summary["distance_to_collision_mean"],
+                              "reached_end": summary["reached_end"]})
+    return found
+
+
+def table(points: list[dict[str, Any]]) -> str:
+    """Markdown: one row per seed and epoch."""
+    lines = ["| seed | epoch | validation loss | to first collision (m) | ends reached /20 | "
+             + " | ".join(title for title, _, _ in COLUMNS) + " |",
+             "|---|---|---|---|---|" + "---|" * len(COLUMNS)]
+    for p in points:
+        diagnostics = ("–" if p.get(key) is None else format(p[key], fmt) for _, key, fmt in COLUMNS)
+        cells = [p["seed"], p["epoch"], f"{p['val_loss']:.4f}", f"{p['distance_to_collision_mean']:.2f}",
+                 p["reached_end"], *diagnostics]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
+    return "\n".join(lines)
+
+
+def plot(points: list[dict[str, Any]], path: Path) -> None:
+    """Validation loss and distance to the first collision against the epoch, one line per seed."""
+    fig, (loss, drive) = plt.subplots(1, 2, figsize=(10, 3.8))
+    for seed in sorted({p["seed"] for p in points}):
+        mine = [p for p in points if p["seed"] == seed]
+        loss.plot([p["epoch"] for p in mine], [p["val_loss"] for p in mine], "o-", label=f"seed {seed}")
+        drive.plot([p["epoch"] for p in mine], [p["distance_to_collision_mean"] for p in mine], "o-",
+                   label=f"seed {seed}")
+    loss.set(xlabel="epoch", ylabel="validation loss", title="validation loss")
+    drive.set(xlabel="epoch", ylabel="m", title="distance to the first collision (val canyons)")
+    for ax in (loss, drive):
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser.add_argument("action", choices=("run", "table"), help="run (resumed) and tabulate, or tabulate")
+    parser.add_argument("out", type=Path, help="an oracle-gap folder (its dataset and val canyons)")
+    parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
+    parser.add_argument("--epochs", type=int, default=200, help="the training's length (the paper's 200)")
+    parser.add_argument("--snapshots", default="20,40,80,120,160", help="epochs whose weights are driven too")
+    parser.add_argument("--net", choices=("depth", "coll"), default="depth", help="the network")
+    parser.add_argument("--figure", type=Path, help="where to draw loss and driving against the epoch")
+    args = parser.parse_args(argv)
+
+    def work() -> int:
+        if not (args.out / "data").is_dir():
+            raise ConfigError(f"{args.out}: not an oracle-gap folder (no data/ in it)")
+        setup = Setup(seeds=parse_ints(args.seeds, "--seeds"))
+        snapshots = parse_ints(args.snapshots, "--snapshots")
+        if args.action == "run":
+            run(args.out, setup, args.epochs, snapshots, args.net)
+        points = rows(args.out, setup, args.epochs, snapshots, args.net)
+        print(table(points))
+        if args.figure:
+            plot(points, args.figure)
+        return 0
+
+    return guarded(PROG, work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
