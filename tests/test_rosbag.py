@@ -263,13 +263,13 @@ def test_a_camera_only_recording_imports_with_an_empty_scan_topic(tmp_path: Path
     assert np.allclose(run.actions[:-1], 0.1) and np.allclose(run.poses[:, 0], np.asarray(frames) / 1000)
 
 
-@pytest.mark.slow  # a toy floor labeller, a labelling and a training: ~10 s
+@pytest.mark.slow  # a toy labeller (the default, monodepth), a labelling and a training: ~10 s
 def test_a_camera_only_recording_trains_on_labels_from_its_own_camera(tmp_path: Path) -> None:
     # Two drives 10 s apart (each 30 frames at 4 Hz): one train run, one val run; no LiDAR anywhere.
     frames = [250 * i for i in range(30)] + [20_000 + 250 * i for i in range(30)]
     bag = write_bag(tmp_path / "camera.bag", frames, [(t + 30, 0.5, 0.1) for t in frames], scan_type=None,
                     ros1=True)
-    data, labeller, net = tmp_path / "data", tmp_path / "floor", tmp_path / "net"
+    data, labeller, net = tmp_path / "data", tmp_path / "labeller", tmp_path / "net"
     assert main(["bag", "import", str(bag), "--out", str(data), "--scan-topic", ""]) == 0
     assert main(["labeller", "--data", str(data), "--out", str(labeller), "--steps", "3", "--batch-size", "2",
                  "--pool-frames", "2", "--width", "4", "--no-progress"]) == 0  # camera and odometry only
