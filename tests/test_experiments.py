@@ -8,9 +8,11 @@ import shutil
 from pathlib import Path
 
 import pytest
+import torch
 
 from depthq.errors import ConfigError
 from depthq.experiments import oracle_gap, privileged, training_length
+from depthq.nets.checkpoint import read_weights
 from depthq.report.findings import FINDINGS, read_findings
 
 
@@ -111,11 +113,19 @@ def test_training_length_drives_every_snapshot_beside_its_validation_loss(
     out = tmp_path / "length"
     shutil.copytree(smoke, out)
     setup = oracle_gap.Setup(preset="smoke", canyons=None, runs=6, sizes=(6,), seeds=(0,))
-    assert training_length.run(out, setup, 3, (1,)) == 0
+    assert training_length.run(out, setup, 3, (1,), average=True) == 0
     model = "depth_n6_s0_epochs3_snapshots1"
     assert (out / "models" / model / "epoch_0001.safetensors").is_file()
-    points = training_length.rows(out, setup, 3, (1,))
-    assert [p["epoch"] for p in points] == [1, 3]
+    points = training_length.rows(out, setup, 3, (1,), average=True)
+    assert [p["epoch"] for p in points] == [1, 3, "mean"]
+    # The mean of epochs 1 and 3, weight by weight, is the checkpoint the last point drove.
+    mean_folder = out / "models" / training_length.averaged_name(model)
+    (first, _), (last, _), (mean, _) = (read_weights(folder / f"{stem}.safetensors") for folder, stem in (
+        (out / "models" / model, "epoch_0001"), (out / "models" / model, "last"), (mean_folder, "last")))
+    assert all(torch.allclose(mean[k], (first[k] + last[k]) / 2) for k in mean if mean[k].is_floating_point())
+    driven = json.loads((out / "eval" / mean_folder.name / "summary.json").read_text())["policy"]
+    assert driven["checkpoint"] == str(mean_folder)
+    points = points[:2]
     with (out / "models" / model / "metrics.csv").open() as f:
         losses = [float(line.split(",")[2]) for line in f.read().splitlines()[1:]]
     assert [p["val_loss"] for p in points] == pytest.approx([losses[0], losses[2]])
@@ -130,6 +140,7 @@ def test_training_length_drives_every_snapshot_beside_its_validation_loss(
     assert (out / training_length.MEASURED).stat().st_mtime_ns == stamp
     rows = training_length.table(points).splitlines()
     assert len(rows) == 4 and rows[3].startswith(f"| 0 | 3 | {points[1]['val_loss']:.4f} | ")
+    assert "| validation loss | 2 | – | – |" in training_length.predicts(points)  # 2 points: no ρ
     training_length.plot(points, out / "length.png")
     assert (out / "length.png").stat().st_size > 5000
     with pytest.raises(ConfigError, match="snapshots"):

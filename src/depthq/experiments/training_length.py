@@ -5,18 +5,22 @@ Asks where, between the default's 40 epochs and the paper's 200, the driving tur
 with it.
 
     python -m depthq.experiments.training_length run OUT [--seeds 0] [--epochs 200] \\
-        [--snapshots 20,40,80,120,160] [--net depth] [--figure PATH]
+        [--snapshots 20,40,80,120,160] [--net depth] [--average] [--figure PATH]
 
 OUT is a `python -m depthq.experiments.oracle_gap run` folder (its dataset and canyons; the training is
 its sweep's, `--set epochs=… --set snapshots=…`). The final weights are the sweep's own evaluation
 (OUT/eval/<model>), each snapshot's is OUT/eval/<model>_epoch<N>; the agreements go to
-OUT/training_length.json (each evaluation measured once). The `eval` canyons are never driven here.
+OUT/training_length.json (each evaluation measured once). `--average` drives the mean of those weights
+too (OUT/models/<model>_mean, Polyak averaging after the fact). It prints one row per seed and epoch, then
+how well the validation loss and each diagnostic rank the points' driving (Spearman's ρ). The `eval`
+canyons are never driven here.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -26,8 +30,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import torch
+from scipy.stats import spearmanr
 
-from depthq.configio import read_json, write_json
+from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
 from depthq.evaluate.oracle import Oracle
@@ -35,6 +41,7 @@ from depthq.experiments.cells import evaluation_summary
 from depthq.experiments.cli import guarded
 from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.experiments.probe import measure_agreement
+from depthq.nets.checkpoint import read_weights, snapshot_stem, weights_bytes
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.reproduce import run_sweep
 
@@ -54,15 +61,42 @@ def candidate(epochs: int, snapshots: tuple[int, ...], net: str = "depth") -> Ca
     return Candidate(f"{epochs} epochs", (f"epochs={epochs}", f"snapshots={kept}"), net)
 
 
-def _points(model: str, epochs: int, snapshots: tuple[int, ...]) -> list[tuple[int, str, str | None]]:
-    """(epoch, evaluation folder name, weights) for every snapshot, then the final weights."""
-    return [(e, f"{model}_epoch{e}", f"epoch:{e}") for e in snapshots] + [(epochs, model, None)]
+def averaged_name(model: str) -> str:
+    """The checkpoint folder of `model`'s mean weights (`average_weights`)."""
+    return f"{model}_mean"
+
+
+def _points(model: str, epochs: int, snapshots: tuple[int, ...], average: bool = False
+            ) -> list[tuple[int | str, str, str | None]]:
+    """(epoch, evaluation folder name, weights) for every snapshot, then the final weights, then (with
+    `average`) the mean of them all ("mean")."""
+    return ([(e, f"{model}_epoch{e}", f"epoch:{e}") for e in snapshots] + [(epochs, model, None)]
+            + ([("mean", averaged_name(model), None)] if average else []))
+
+
+def average_weights(model: Path, epochs: int, snapshots: tuple[int, ...], out: Path) -> Path:
+    """The mean of `model`'s snapshots' and final weights as a checkpoint folder `out` (the model's
+    config.json, the mean as last.safetensors): Polyak averaging after the fact, which asks whether
+    the driving's spread between neighbouring epochs is noise that averaging removes. Kept if written."""
+    if (out / "last.safetensors").is_file():
+        return out
+    stems = [*(snapshot_stem(e) for e in snapshots), "last"]
+    states = [read_weights(model / f"{stem}.safetensors")[0] for stem in stems]
+    mean = {key: torch.stack([s[key] for s in states]).mean(0) if value.is_floating_point() else value
+            for key, value in states[-1].items()}
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copy(model / "config.json", out / "config.json")
+    write_json(out / "last.json", {**read_json(model / "last.json"), "averaged": stems})
+    atomic_write_bytes(out / "last.safetensors",
+                       weights_bytes(mean, {"epoch": str(epochs), "averaged": "+".join(stems)}))
+    return out
 
 
 def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth",
-        workers: int = 1) -> int:
-    """Per seed: the sweep's training and final evaluation, each snapshot's evaluation, and every
-    evaluation's agreement with the one-step oracle (resumed: what exists is kept)."""
+        workers: int = 1, average: bool = False) -> int:
+    """Per seed: the sweep's training and final evaluation, each snapshot's evaluation (with `average`,
+    that of their mean weights too), and every evaluation's agreement with the one-step oracle
+    (resumed: what exists is kept)."""
     if not snapshots or max(snapshots) >= epochs:
         raise ConfigError(f"snapshots {snapshots} must be epochs before the last ({epochs})")
     chosen = candidate(epochs, snapshots, net)
@@ -70,9 +104,13 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
         sweep = sweep_of(setup, chosen, (seed,))
         run_sweep(sweep, out)
         (model,) = (m.name for m in sweep.models())
-        for epoch, name, weights in _points(model, epochs, snapshots):
+        for epoch, name, weights in _points(model, epochs, snapshots, average):
             folder = out / "eval" / name
-            if weights is not None and evaluation_summary(folder) is None:
+            if epoch == "mean" and evaluation_summary(folder) is None:
+                mean = average_weights(out / "models" / model, epochs, snapshots, out / "models" / name)
+                print(f"{out}: {model}, the mean of its weights", flush=True)
+                evaluate(str(mean), folder, sweep.eval_config(), workers=workers, video=False)
+            elif weights is not None and evaluation_summary(folder) is None:
                 print(f"{out}: {model} at epoch {epoch}", flush=True)
                 evaluate(str(out / "models" / model), folder, replace(sweep.eval_config(), weights=weights),
                          workers=workers, video=False)
@@ -84,8 +122,8 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
     return 0
 
 
-def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth"
-         ) -> list[dict[str, Any]]:
+def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth",
+         average: bool = False) -> list[dict[str, Any]]:
     """Every finished point: seed, epoch, validation loss, driving and the diagnostic's measures."""
     measured = read_json(out / MEASURED) if (out / MEASURED).is_file() else {}
     found = []
@@ -96,10 +134,10 @@ def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: 
             continue
         with metrics.open() as f:
             val_loss = {int(r["epoch"]): float(r["val_loss"]) for r in csv.DictReader(f)}
-        for epoch, name, _ in _points(model, epochs, snapshots):
+        for epoch, name, _ in _points(model, epochs, snapshots, average):
             summary = evaluation_summary(out / "eval" / name)
             if summary is not None and name in measured:
-                found.append({"seed": seed, "epoch": epoch, "val_loss": val_loss[epoch], **measured[name],
+                found.append({"seed": seed, "epoch": epoch, "val_loss": val_loss.get(epoch), **measured[name],
                               "distance_to_collision_mean": summary["distance_to_collision_mean"],
                               "reached_end": summary["reached_end"]})
     return found
@@ -112,9 +150,24 @@ def table(points: list[dict[str, Any]]) -> str:
              "|---|---|---|---|---|" + "---|" * len(COLUMNS)]
     for p in points:
         diagnostics = ("–" if p.get(key) is None else format(p[key], fmt) for _, key, fmt in COLUMNS)
-        cells = [p["seed"], p["epoch"], f"{p['val_loss']:.4f}", f"{p['distance_to_collision_mean']:.2f}",
+        loss = "–" if p["val_loss"] is None else f"{p['val_loss']:.4f}"
+        cells = [p["seed"], p["epoch"], loss, f"{p['distance_to_collision_mean']:.2f}",
                  p["reached_end"], *diagnostics]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
+    return "\n".join(lines)
+
+
+def predicts(points: list[dict[str, Any]]) -> str:
+    """Markdown: how well the validation loss and each diagnostic rank the points' distances to the first
+    collision (Spearman's ρ over every seed and epoch; – under 3 points)."""
+    lines = ["| measure | points | Spearman ρ with distance to first collision | p |", "|---|---|---|---|"]
+    for title, key in (("validation loss", "val_loss"), *((t, k) for t, k, _ in COLUMNS)):
+        pairs = [(p[key], p["distance_to_collision_mean"]) for p in points if p.get(key) is not None]
+        if len(pairs) < 3:
+            lines.append(f"| {title} | {len(pairs)} | – | – |")
+            continue
+        rho, pvalue = spearmanr(*zip(*pairs, strict=True))
+        lines.append(f"| {title} | {len(pairs)} | {rho:+.2f} | {pvalue:.3f} |")
     return "\n".join(lines)
 
 
@@ -122,7 +175,7 @@ def plot(points: list[dict[str, Any]], path: Path) -> None:
     """Validation loss and distance to the first collision against the epoch, one line per seed."""
     fig, (loss, drive) = plt.subplots(1, 2, figsize=(10, 3.8))
     for seed in sorted({p["seed"] for p in points}):
-        mine = [p for p in points if p["seed"] == seed]
+        mine = [p for p in points if p["seed"] == seed and p["epoch"] != "mean"]
         loss.plot([p["epoch"] for p in mine], [p["val_loss"] for p in mine], "o-", label=f"seed {seed}")
         drive.plot([p["epoch"] for p in mine], [p["distance_to_collision_mean"] for p in mine], "o-",
                    label=f"seed {seed}")
@@ -145,6 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--epochs", type=int, default=200, help="the training's length (the paper's 200)")
     parser.add_argument("--snapshots", default="20,40,80,120,160", help="epochs whose weights are driven too")
     parser.add_argument("--net", choices=("depth", "coll"), default="depth", help="the network")
+    parser.add_argument("--average", action="store_true",
+                        help="also drive the mean of the snapshots' and final weights (Polyak averaging)")
     parser.add_argument("--figure", type=Path, help="where to draw loss and driving against the epoch")
     args = parser.parse_args(argv)
 
@@ -154,9 +209,11 @@ def main(argv: list[str] | None = None) -> int:
         setup = Setup(seeds=parse_ints(args.seeds, "--seeds"))
         snapshots = parse_ints(args.snapshots, "--snapshots")
         if args.action == "run":
-            run(args.out, setup, args.epochs, snapshots, args.net)
-        points = rows(args.out, setup, args.epochs, snapshots, args.net)
+            run(args.out, setup, args.epochs, snapshots, args.net, average=args.average)
+        points = rows(args.out, setup, args.epochs, snapshots, args.net, args.average)
         print(table(points))
+        print()
+        print(predicts(points))
         if args.figure:
             plot(points, args.figure)
         return 0
