@@ -41,7 +41,14 @@ from depthq.experiments.cells import evaluation_summary
 from depthq.experiments.cli import guarded
 from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.experiments.probe import measure_agreement
-from depthq.nets.checkpoint import read_weights, snapshot_stem, weights_bytes
+from depthq.nets.checkpoint import (
+    chosen_weights,
+    read_config,
+    read_weights,
+    snapshot_stem,
+    weights_bytes,
+    weights_stem,
+)
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.reproduce import run_sweep
 
@@ -124,7 +131,9 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
 
 def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: str = "depth",
          average: bool = False) -> list[dict[str, Any]]:
-    """Every finished point: seed, epoch, validation loss, driving and the diagnostic's measures."""
+    """Every finished point: seed, epoch (of the weights driven: the sweep's own evaluation drives the
+    checkpoint's choice, a Coll-Q-Net's best epoch), validation loss, driving and the diagnostic's
+    measures."""
     measured = read_json(out / MEASURED) if (out / MEASURED).is_file() else {}
     found = []
     for seed in setup.seeds:
@@ -135,6 +144,10 @@ def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: 
         with metrics.open() as f:
             val_loss = {int(r["epoch"]): float(r["val_loss"]) for r in csv.DictReader(f)}
         for epoch, name, _ in _points(model, epochs, snapshots, average):
+            if name == model:  # the sweep drove the checkpoint's own choice: a Coll-Q-Net's best epoch
+                folder = out / "models" / model
+                stem = weights_stem(chosen_weights(read_config(folder), None))
+                epoch = read_json(folder / f"{stem}.json")["epoch"]
             summary = evaluation_summary(out / "eval" / name)
             if summary is not None and name in measured:
                 found.append({"seed": seed, "epoch": epoch, "val_loss": val_loss.get(epoch), **measured[name],
