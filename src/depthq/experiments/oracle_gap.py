@@ -35,14 +35,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
-from scipy.stats import spearmanr
 
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.oracle import Oracle
-from depthq.experiments.cells import mean_interval
+from depthq.experiments.cells import mean_interval, ranks_driving
 from depthq.experiments.cli import guarded
 from depthq.experiments.probe import agreement_file, measure_agreement
 from depthq.nets.checkpoint import load_qnet
@@ -223,14 +222,7 @@ def predicts(out: Path) -> str:
     every model measured in OUT (each model-seed one point): Spearman's rank correlation."""
     measured = _diagnostics(out)
     lines = ["| diagnostic | models | Spearman ρ with distance to first collision | p |", "|---|---|---|---|"]
-    for label, key in DIAGNOSTICS:
-        pairs = [(m[key], m["distance_to_collision_mean"])
-                 for m in measured.values() if m.get(key) is not None]
-        if len(pairs) < 3:
-            lines.append(f"| {label} | {len(pairs)} | – | – |")
-            continue
-        rho, p = spearmanr(*zip(*pairs, strict=True))
-        lines.append(f"| {label} | {len(pairs)} | {rho:+.2f} | {p:.3f} |")
+    lines += [ranks_driving(label, list(measured.values()), key) for label, key in DIAGNOSTICS]
     return "\n".join(lines)
 
 

@@ -31,13 +31,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import torch
-from scipy.stats import spearmanr
 
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
 from depthq.evaluate.oracle import Oracle
-from depthq.experiments.cells import evaluation_summary
+from depthq.experiments.cells import evaluation_summary, ranks_driving
 from depthq.experiments.cli import guarded
 from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.experiments.probe import measure_agreement
@@ -174,24 +173,24 @@ def predicts(points: list[dict[str, Any]]) -> str:
     """Markdown: how well the validation loss and each diagnostic rank the points' distances to the first
     collision (Spearman's ρ over every seed and epoch; – under 3 points)."""
     lines = ["| measure | points | Spearman ρ with distance to first collision | p |", "|---|---|---|---|"]
-    for title, key in (("validation loss", "val_loss"), *((t, k) for t, k, _ in COLUMNS)):
-        pairs = [(p[key], p["distance_to_collision_mean"]) for p in points if p.get(key) is not None]
-        if len(pairs) < 3:
-            lines.append(f"| {title} | {len(pairs)} | – | – |")
-            continue
-        rho, pvalue = spearmanr(*zip(*pairs, strict=True))
-        lines.append(f"| {title} | {len(pairs)} | {rho:+.2f} | {pvalue:.3f} |")
+    measures = (("validation loss", "val_loss"), *((title, key) for title, key, _ in COLUMNS))
+    lines += [ranks_driving(title, points, key) for title, key in measures]
     return "\n".join(lines)
 
 
 def plot(points: list[dict[str, Any]], path: Path) -> None:
-    """Validation loss and distance to the first collision against the epoch, one line per seed."""
+    """Validation loss and distance to the first collision against the epoch, one line per seed (the
+    mean weights' distance, where driven, a dashed level)."""
     fig, (loss, drive) = plt.subplots(1, 2, figsize=(10, 3.8))
     for seed in sorted({p["seed"] for p in points}):
         mine = [p for p in points if p["seed"] == seed and p["epoch"] != "mean"]
         loss.plot([p["epoch"] for p in mine], [p["val_loss"] for p in mine], "o-", label=f"seed {seed}")
-        drive.plot([p["epoch"] for p in mine], [p["distance_to_collision_mean"] for p in mine], "o-",
-                   label=f"seed {seed}")
+        distances = [p["distance_to_collision_mean"] for p in mine]
+        (line,) = drive.plot([p["epoch"] for p in mine], distances, "o-", label=f"seed {seed}")
+        for p in points:  # the mean weights: a level in the seed's colour
+            if p["seed"] == seed and p["epoch"] == "mean":
+                drive.axhline(p["distance_to_collision_mean"], color=line.get_color(), ls="--",
+                              label=f"seed {seed}, mean weights")
     loss.set(xlabel="epoch", ylabel="validation loss", title="validation loss")
     drive.set(xlabel="epoch", ylabel="m", title="distance to the first collision (val canyons)")
     for ax in (loss, drive):
