@@ -50,6 +50,7 @@ from depthq.nets.checkpoint import (
 )
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.reproduce import run_sweep
+from depthq.train.folder import METRICS
 
 PROG = "python -m depthq.experiments.training_length"
 MEASURED = "training_length.json"
@@ -106,22 +107,21 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
     if not snapshots or max(snapshots) >= epochs:
         raise ConfigError(f"snapshots {snapshots} must be epochs before the last ({epochs})")
     chosen = candidate(epochs, snapshots, net)
+    path = out / MEASURED
+    measured: dict[str, Any] = read_json(path) if path.is_file() else {}
     for seed in setup.seeds:
         sweep = sweep_of(setup, chosen, (seed,))
-        run_sweep(sweep, out)
+        run_sweep(sweep, out)  # the training and its final weights' evaluation
         (model,) = (m.name for m in sweep.models())
         for epoch, name, weights in _points(model, epochs, snapshots, average):
             folder = out / "eval" / name
-            if epoch == "mean" and evaluation_summary(folder) is None:
-                mean = average_weights(out / "models" / model, epochs, snapshots, out / "models" / name)
-                print(f"{out}: {model}, the mean of its weights", flush=True)
-                evaluate(str(mean), folder, sweep.eval_config(), workers=workers, video=False)
-            elif weights is not None and evaluation_summary(folder) is None:
-                print(f"{out}: {model} at epoch {epoch}", flush=True)
-                evaluate(str(out / "models" / model), folder, replace(sweep.eval_config(), weights=weights),
+            if name != model and evaluation_summary(folder) is None:
+                models = out / "models"
+                checkpoint = (average_weights(models / model, epochs, snapshots, models / name)
+                              if epoch == "mean" else models / model)
+                print(f"{out}: evaluate {name}", flush=True)
+                evaluate(str(checkpoint), folder, replace(sweep.eval_config(), weights=weights),
                          workers=workers, video=False)
-            path = out / MEASURED
-            measured: dict[str, Any] = read_json(path) if path.is_file() else {}
             if name not in measured:
                 measured[name] = measure_agreement(folder, Oracle(), out / "probe", predictions=True)
                 write_json(path, measured)
@@ -137,7 +137,7 @@ def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: 
     found = []
     for seed in setup.seeds:
         (model,) = (m.name for m in sweep_of(setup, candidate(epochs, snapshots, net), (seed,)).models())
-        metrics = out / "models" / model / "metrics.csv"
+        metrics = out / "models" / model / METRICS
         if not metrics.is_file():
             continue
         with metrics.open() as f:
