@@ -77,10 +77,9 @@ class LabellerConfig:
     # label).
     data: str
     # How a frame becomes bins: "monodepth" (camera and odometry only: a depth net learnt by warping each
-    # frame's neighbours into it, Monodepth2's self-supervision; the default, the one whose labels drive
-    # both families' val canyons as far as the LiDAR's), "floor" (camera and odometry only: where the
-    # floor ends, learnt from the robot's future footprint) or "perception" (a read-out of the trunk's
-    # feature learnt on another family's LiDAR: a stand-in for an off-the-shelf depth model).
+    # frame's neighbours into it, Monodepth2's self-supervision), "floor" (camera and odometry only: where
+    # the floor ends, learnt from the robot's future footprint) or "perception" (a read-out of the
+    # trunk's feature learnt on another family's LiDAR: a stand-in for an off-the-shelf depth model).
     method: str = "monodepth"
     # perception: a frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
     trunk: str = DEFAULT_TRUNK
