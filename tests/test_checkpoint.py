@@ -22,7 +22,9 @@ from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, load_qnet, read_config
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ
+from depthq.train import trainer
 from depthq.train.config import TrainConfig
+from depthq.train.folder import TrainState
 from depthq.train.trainer import train
 
 FAST = {"train_batches": 1, "val_batches": 1, "batch_size": 16}  # an Adadelta step of the head: ≈ 0.5 s
@@ -289,9 +291,50 @@ def test_snapshots_are_kept_loadable_and_survive_a_resume(data: Path, tmp_path: 
         train(_config(data, epochs=4, snapshots=(2, 3)), split, progress=False)
 
 
+@pytest.mark.slow
+def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume(
+    data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    whole = train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), tmp_path / "whole", progress=False)
+    snaps = [_tensors(whole / f"epoch_000{e}.safetensors") for e in (2, 3, 4)]
+    mean = _tensors(whole / "average.safetensors")
+    assert mean.keys() == snaps[0].keys()
+    for key, value in mean.items():
+        if value.is_floating_point():
+            torch.testing.assert_close(value, sum(s[key] for s in snaps) / 3)
+    assert not _equal(mean, snaps[-1])
+    assert read_json(whole / "average.json") == {"epochs": [2, 4], "count": 3}
+    net, _ = load_qnet(whole, "average")
+    assert _equal({f"head.{k}": v for k, v in net.head.state_dict().items()}, mean)
+
+    split = tmp_path / "split"  # interrupted inside the window (after epoch 3's checkpoint), then resumed
+    save_epoch = trainer.folder.save_epoch
+
+    def interrupted(out: Path, model: object, optimizer: object, rng: object, state: TrainState,
+                    *args: object) -> None:
+        save_epoch(out, model, optimizer, rng, state, *args)
+        if state.epoch == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(trainer.folder, "save_epoch", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), split, progress=False)
+    monkeypatch.undo()
+    assert read_json(split / "average.json") == {"epochs": [2, 3], "count": 2}
+    with pytest.raises(ConfigError, match=r"inside a weight average from epoch 3, but the state holds one"):
+        train(_config(data, epochs=5, snapshots=(2, 3, 4), average=3), split, progress=False)
+    train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), split, progress=False)
+    assert _equal(_tensors(split / "average.safetensors"), mean)
+    with pytest.raises(ConfigError, match=r"no average\.safetensors .* without train\.average"):
+        load_qnet(train(_config(data, epochs=1), tmp_path / "plain", progress=False), "average")
+
+
 @pytest.mark.parametrize(
     ("change", "message"),
     [
+        ({"average": 3}, r"train\.average 3 exceeds this training's 2 epochs"),
+        ({"average": -1}, r"train\.average must be an integer >= 0, got -1"),
+        ({"weights": "average"}, r"'average' needs a weight average"),
         ({"snapshots": (0,)}, "epoch 0 is not one of"),
         ({"snapshots": (5,)}, r"epoch 5 is not one of this training's epochs 1\.\.2"),
         ({"snapshots": (1, 1)}, r"repeats epoch\(s\) \[1\]"),

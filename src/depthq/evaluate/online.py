@@ -74,7 +74,7 @@ class EvalConfig:
     time_limit_s: float | None = None
     # Seeds the sensor noise and the OU policy: canyon i uses seed + i.
     seed: int = 0
-    # A checkpoint's weights: best, last (= final) or epoch:N; none: its own (`TrainConfig.weights`).
+    # A checkpoint's weights: best, last (= final), average or epoch:N; none: its own (`TrainConfig.weights`).
     weights: str | None = None
     # Decisions (camera frames) per second; none: the rate a checkpoint records, else the default.
     decision_hz: float | None = None

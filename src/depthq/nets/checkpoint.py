@@ -70,9 +70,11 @@ FORMAT = "depthq-checkpoint"
 # 1: the first layout; 2: every weight file records its SHA-256; 3: config.json describes its
 # policy and dataset (absolute path), and TrainConfig has `weights` (then `select`) and `snapshots`.
 FORMAT_VERSION = 3
-WEIGHTS = ("best", "final")  # TrainConfig.weights: the weights a checkpoint's policy uses by default
+# TrainConfig.weights: the weights a checkpoint's policy uses by default
+WEIGHTS = ("best", "final", "average")
 DIGEST = "sha256"
-_WEIGHT_FILE = {"best": "best", "last": "last", "final": "last"}  # weights → weight file
+# weights → weight file
+_WEIGHT_FILE = {"best": "best", "last": "last", "final": "last", "average": "average"}
 _SNAPSHOT = re.compile(r"epoch:([0-9]+)")
 _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, then the tensor bytes
 # What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
@@ -122,12 +124,15 @@ class PolicyRecord:
 
 def weights_stem(weights: str) -> str:
     """The weight file `weights` names: 'best', 'last' or 'final' (the same file: the weights after
-    the last epoch), or 'epoch:N' (a snapshot, `TrainConfig.snapshots`)."""
+    the last epoch), 'average' (the last epochs' mean, `TrainConfig.average`) or 'epoch:N' (a
+    snapshot, `TrainConfig.snapshots`)."""
     if weights in _WEIGHT_FILE:
         return _WEIGHT_FILE[weights]
     match = _SNAPSHOT.fullmatch(str(weights))
     if match is None or int(match.group(1)) < 1:
-        raise ConfigError(f"checkpoint weights must be 'best', 'last', 'final' or 'epoch:N', got {weights!r}")
+        raise ConfigError(
+            f"checkpoint weights must be 'best', 'last', 'final', 'average' or 'epoch:N', got {weights!r}"
+        )
     return snapshot_stem(int(match.group(1)))
 
 
@@ -334,9 +339,15 @@ def load_qnet(
     chosen = chosen_weights(record, weights)
     path = folder / f"{weights_stem(chosen)}.safetensors"
     if not path.is_file():
-        snapshots = record["train"]["snapshots"]
-        why = (f"its snapshots are at epochs {snapshots}" if chosen.startswith("epoch:")
-               else "no epoch finished yet?")
+        train = record["train"]
+        if chosen.startswith("epoch:"):
+            why = f"its snapshots are at epochs {train['snapshots']}"
+        elif chosen == "average":
+            n = train.get("average", 0)
+            why = (f"it averages its last {n} epochs: not reached yet?" if n
+                   else "it was trained without train.average")
+        else:
+            why = "no epoch finished yet?"
         raise ConfigError(f"{folder}: no {path.name} for weights {chosen!r} ({why})")
     tensors, _ = read_weights(path)
     net = QNet(build_trunk(str(record.get("trunk"))), build_head(from_dict(HeadConfig, head)))

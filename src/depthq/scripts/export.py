@@ -20,8 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoint", type=Path, help="a checkpoint folder written by `depthq train`")
     p.add_argument("--out", type=Path, required=True, help="folder for <checkpoint name>.onnx")
     p.add_argument("--weights", "--which", dest="weights", default=None,
-                   help="best (lowest validation loss), last (= final) or epoch:N [the checkpoint's own, "
-                   "train --weights]; --which: its old name")
+                   help="best (lowest validation loss), last (= final), average or epoch:N [the checkpoint's "
+                   "own, train --weights]; --which: its old name")
     p.add_argument("--frame-size", default=None,
                    help="camera frame the graph takes, HEIGHTxWIDTH [the checkpoint's: its data's frames]")
 

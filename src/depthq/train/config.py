@@ -138,13 +138,18 @@ class TrainConfig:
     # Which frames of the dataset's runs are samples, and their labels (docs/design.md#labels).
     samples: SampleConfig = field(default_factory=SampleConfig)
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
-    # validation loss) or final (after the last epoch, as the original evaluated them); none: final
-    # for a depth_first head, else best. The head form's choice was made on `val` canyons
-    # (docs/design.md#weights). Training is the same either way.
+    # validation loss), final (after the last epoch, as the original evaluated them) or average (the
+    # last `average` epochs' mean); none: final for a depth_first head, else best. The head form's
+    # choice was made on `val` canyons (docs/design.md#weights). Training is the same either way.
     weights: str | None = None
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--weights epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
+    # N > 0 also keeps the mean of the weights after each of the last N epochs (average.safetensors,
+    # `--weights average`): stochastic weight averaging's equal-weight mean (torch's
+    # `swa_utils.AveragedModel`), a smoother draw of the training's end than one epoch's weights
+    # (docs/design.md#weight-average). Training is the same either way.
+    average: int = field(default=0, metadata=OMIT_DEFAULT)
     # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
     # gradients, loss and Adadelta stay float32); "fp32": float32 throughout. Policies decide in float32.
     precision: str = "fp32"
@@ -204,6 +209,7 @@ class TrainConfig:
         if self.weights not in WEIGHTS:
             raise ConfigError(f"train.weights must be one of {WEIGHTS}, got {self.weights!r}")
         self._check_snapshots()
+        self._check_average()
         if self.precision not in PRECISIONS:
             raise ConfigError(f"train.precision must be one of {PRECISIONS}, got {self.precision!r}")
         if self.labels not in LABEL_SOURCES:
@@ -256,6 +262,18 @@ class TrainConfig:
         repeated = sorted({e for e in self.snapshots if self.snapshots.count(e) > 1})
         if repeated:
             raise ConfigError(f"train.snapshots repeats epoch(s) {repeated}: {self.snapshots}")
+
+    def _check_average(self) -> None:
+        _int_at_least("average", self.average, 0)
+        if self.average > self.epochs:
+            raise ConfigError(f"train.average {self.average} exceeds this training's {self.epochs} epochs")
+        if self.weights == "average" and not self.average:
+            raise ConfigError("train.weights 'average' needs a weight average: set train.average to N >= 1")
+
+    @property
+    def average_from(self) -> int | None:
+        """The first epoch whose weights enter the average; None without one."""
+        return self.epochs - self.average + 1 if self.average else None
 
     def step_weights(self) -> tuple[float, ...]:
         """The loss weight of each lookahead step, t+1 first."""

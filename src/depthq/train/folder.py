@@ -9,12 +9,16 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
                              and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
                              stored, it is rebuilt from the package's pretrained weights
     epoch_0040.safetensors   the weights after an epoch of `TrainConfig.snapshots` (kept on resume)
-    best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise)
+    average.safetensors      the mean of the weights after each of the last `TrainConfig.average`
+                             epochs so far (from the window's first epoch on)
+    best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
+                             the epochs averaged)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
                              ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
-                             ("rng.torch"), and in its metadata the epoch, the NumPy sampling
-                             generator's state, the metrics history and the best epoch
+                             ("rng.torch"), the weight average so far ("average.*"), and in its
+                             metadata the epoch, the NumPy sampling generator's state, the metrics
+                             history, the best epoch and the average's first epoch and count
     last_state.json          a readable copy of that metadata (never read back)
     tb/                      TensorBoard event files (a log: appended, purged of stale epochs on resume)
 
@@ -35,6 +39,7 @@ from typing import Any
 import numpy as np
 import torch
 from safetensors import SafetensorError, safe_open
+from torch.optim.swa_utils import AveragedModel
 
 from depthq.configio import atomic_write_bytes, to_dict, write_json
 from depthq.control.action_selection import ACTIONS, RULE_OF
@@ -174,22 +179,29 @@ def save_epoch(
     state: TrainState,
     is_best: bool,
     snapshot: bool = False,
+    average: AveragedModel | None = None,
+    average_from: int | None = None,
 ) -> None:
     """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
-    also as epoch_NNNN.safetensors), metrics and logs."""
+    also as epoch_NNNN.safetensors; `average`, once it holds epochs from `average_from` on: also
+    average.safetensors), metrics and logs."""
     weights = trainable_state(model)
+    averaged = int(average.n_averaged) if average is not None else 0
     optim = optimizer.state_dict()
     tensors = {f"model.{k}": v for k, v in weights.items()}
     for param, values in optim["state"].items():
         for key, v in values.items():
             tensors[f"optim.{param}.{key}"] = torch.as_tensor(v).detach().cpu().clone()
     tensors["rng.torch"] = torch.get_rng_state()
+    mean = trainable_state(average.module) if averaged else {}
+    tensors.update({f"average.{k}": v for k, v in mean.items()})
     meta = {
         "epoch": state.epoch,
         "rng": rng.bit_generator.state,
         "history": state.history,
         "best": state.best,
         "param_groups": optim["param_groups"],
+        **({"average": {"from": average_from, "count": averaged}} if averaged else {}),
     }
     atomic_write_bytes(out / STATE, weights_bytes(tensors, {"state": json.dumps(meta)}))
     write_json(out / "last_state.json", meta)
@@ -198,6 +210,9 @@ def save_epoch(
     for stem in ("last", *also):
         atomic_write_bytes(out / f"{stem}.safetensors", blob)
         write_json(out / f"{stem}.json", state.history[-1])
+    if averaged:
+        atomic_write_bytes(out / "average.safetensors", weights_bytes(mean, {"epoch": str(state.epoch)}))
+        write_json(out / "average.json", {"epochs": [average_from, state.epoch], "count": averaged})
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()
@@ -218,9 +233,15 @@ def saved_epoch(out: Path) -> int:
 
 
 def load_state(
-    out: Path, model: QNet, optimizer: torch.optim.Optimizer, rng: np.random.Generator
+    out: Path,
+    model: QNet,
+    optimizer: torch.optim.Optimizer,
+    rng: np.random.Generator,
+    average: AveragedModel | None = None,
+    average_from: int | None = None,
 ) -> TrainState:
-    """Restore weights, optimizer, torch RNG and `rng` from the last epoch; a fresh state if none saved."""
+    """Restore weights, optimizer, torch RNG, `rng` and `average` (a window starting at `average_from`)
+    from the last epoch; a fresh state if none saved."""
     path = out / STATE
     if not path.is_file():
         return TrainState()
@@ -236,6 +257,29 @@ def load_state(
         optimizer.load_state_dict({"state": optim_state, "param_groups": meta["param_groups"]})
         torch.set_rng_state(tensors["rng.torch"])
         rng.bit_generator.state = meta["rng"]
-        return TrainState(int(meta["epoch"]), meta["history"], meta["best"])
+        state = TrainState(int(meta["epoch"]), meta["history"], meta["best"])
+    except (KeyError, ValueError, TypeError) as err:
+        raise DataError(f"{path}: not a valid resume state ({err})") from err
+    _load_average(path, tensors, meta.get("average"), state.epoch, average, average_from)
+    return state
+
+
+def _load_average(
+    path: Path, tensors: dict[str, torch.Tensor], saved: dict[str, int] | None, epoch: int,
+    average: AveragedModel | None, average_from: int | None,
+) -> None:
+    """Put a resume state's weight average into `average`, if it is the window asked for."""
+    if average is None or average_from is None or epoch < average_from:
+        return  # no average asked for, or its window starts after the saved epoch
+    if saved is None or saved.get("from") != average_from:
+        raise ConfigError(
+            f"{path}: resuming at epoch {epoch} inside a weight average from epoch {average_from}, but the "
+            f"state holds {'none' if saved is None else 'one from epoch ' + str(saved.get('from'))} "
+            "(were the epochs extended inside the window?); train into a new folder"
+        )
+    try:
+        mean = {k[len("average.") :]: v for k, v in tensors.items() if k.startswith("average.")}
+        load_trainable_state(average.module, mean, path)
+        average.n_averaged.fill_(int(saved["count"]))
     except (KeyError, ValueError, TypeError) as err:
         raise DataError(f"{path}: not a valid resume state ({err})") from err

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch.optim import Optimizer
+from torch.optim.swa_utils import AveragedModel
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
@@ -73,7 +74,10 @@ def train(
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
     val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
-    state = folder.load_state(out, model, optimizer, rng)
+    # The weight average (`TrainConfig.average`); buffers too, so a trained trunk's BatchNorm statistics
+    # are those of the averaged epochs.
+    average = AveragedModel(model, use_buffers=True) if config.average else None
+    state = folder.load_state(out, model, optimizer, rng, average, config.average_from)
     if config.feature_projection and not state.epoch:  # a resumed training's is in its checkpoint
         # On the training samples' cached features (a frozen trunk's: TrainConfig allows no other),
         # never the validation split's.
@@ -115,7 +119,10 @@ def train(
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
             state = folder.TrainState(epoch, [*state.history, row], row if is_best else state.best)
-            folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots)
+            if average is not None and epoch >= config.average_from:
+                average.update_parameters(model)
+            folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
+                              average, config.average_from)
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
