@@ -295,7 +295,8 @@ def test_snapshots_are_kept_loadable_and_survive_a_resume(data: Path, tmp_path: 
 def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume(
     data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    whole = train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), tmp_path / "whole", progress=False)
+    config = _config(data, epochs=4, snapshots=(2, 3, 4), average=0.75)  # epochs 2, 3 and 4
+    whole = train(config, tmp_path / "whole", progress=False)
     snaps = [_tensors(whole / f"epoch_000{e}.safetensors") for e in (2, 3, 4)]
     mean = _tensors(whole / "average.safetensors")
     assert mean.keys() == snaps[0].keys()
@@ -318,12 +319,12 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
 
     monkeypatch.setattr(trainer.folder, "save_epoch", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), split, progress=False)
+        train(config, split, progress=False)
     monkeypatch.undo()
     assert read_json(split / "average.json") == {"epochs": [2, 3], "count": 2}
     with pytest.raises(ConfigError, match=r"inside a weight average from epoch 3, but the state holds one"):
-        train(_config(data, epochs=5, snapshots=(2, 3, 4), average=3), split, progress=False)
-    train(_config(data, epochs=4, snapshots=(2, 3, 4), average=3), split, progress=False)
+        train(_config(data, epochs=8, snapshots=(2, 3, 4), average=0.75), split, progress=False)
+    train(config, split, progress=False)
     assert _equal(_tensors(split / "average.safetensors"), mean)
     with pytest.raises(ConfigError, match=r"no average\.safetensors .* without train\.average"):
         load_qnet(train(_config(data, epochs=1), tmp_path / "plain", progress=False), "average")
@@ -332,8 +333,8 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
 @pytest.mark.parametrize(
     ("change", "message"),
     [
-        ({"average": 3}, r"train\.average 3 exceeds this training's 2 epochs"),
-        ({"average": -1}, r"train\.average must be an integer >= 0, got -1"),
+        ({"average": 1.5}, r"train\.average must be a fraction of the epochs in \[0, 1\] .*got 1\.5"),
+        ({"average": -1}, r"train\.average must be .*, got -1"),
         ({"weights": "average"}, r"'average' needs a weight average"),
         ({"snapshots": (0,)}, "epoch 0 is not one of"),
         ({"snapshots": (5,)}, r"epoch 5 is not one of this training's epochs 1\.\.2"),

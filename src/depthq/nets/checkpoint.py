@@ -124,7 +124,7 @@ class PolicyRecord:
 
 def weights_stem(weights: str) -> str:
     """The weight file `weights` names: 'best', 'last' or 'final' (the same file: the weights after
-    the last epoch), 'average' (the last epochs' mean, `TrainConfig.average`) or 'epoch:N' (a
+    the last epoch), 'average' (the mean of the last epochs', `TrainConfig.average`) or 'epoch:N' (a
     snapshot, `TrainConfig.snapshots`)."""
     if weights in _WEIGHT_FILE:
         return _WEIGHT_FILE[weights]
@@ -343,8 +343,7 @@ def load_qnet(
         if chosen.startswith("epoch:"):
             why = f"its snapshots are at epochs {train['snapshots']}"
         elif chosen == "average":
-            n = train.get("average", 0)
-            why = (f"it averages its last {n} epochs: not reached yet?" if n
+            why = ("its average's first epoch is not reached yet?" if train.get("average")
                    else "it was trained without train.average")
         else:
             why = "no epoch finished yet?"

@@ -139,17 +139,18 @@ class TrainConfig:
     samples: SampleConfig = field(default_factory=SampleConfig)
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
     # validation loss), final (after the last epoch, as the original evaluated them) or average (the
-    # last `average` epochs' mean); none: final for a depth_first head, else best. The head form's
+    # last epochs' mean, `average`); none: final for a depth_first head, else best. The head form's
     # choice was made on `val` canyons (docs/design.md#weights). Training is the same either way.
     weights: str | None = None
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--weights epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
-    # N > 0 also keeps the mean of the weights after each of the last N epochs (average.safetensors,
-    # `--weights average`): stochastic weight averaging's equal-weight mean (torch's
-    # `swa_utils.AveragedModel`), a smoother draw of the training's end than one epoch's weights
-    # (docs/design.md#weight-average). Training is the same either way.
-    average: int = field(default=0, metadata=OMIT_DEFAULT)
+    # f > 0 also keeps the mean of the weights after each epoch of the training's last fraction f
+    # (0.25 of 40 epochs: 31–40; at least the last epoch) as average.safetensors (`--weights
+    # average`): stochastic weight averaging's equal-weight mean (torch's `swa_utils.AveragedModel`), a
+    # smoother draw of the training's end than one epoch's weights (docs/design.md#weight-average).
+    # Training is the same either way.
+    average: float = field(default=0.0, metadata=OMIT_DEFAULT)
     # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
     # gradients, loss and Adadelta stay float32); "fp32": float32 throughout. Policies decide in float32.
     precision: str = "fp32"
@@ -264,16 +265,17 @@ class TrainConfig:
             raise ConfigError(f"train.snapshots repeats epoch(s) {repeated}: {self.snapshots}")
 
     def _check_average(self) -> None:
-        _int_at_least("average", self.average, 0)
-        if self.average > self.epochs:
-            raise ConfigError(f"train.average {self.average} exceeds this training's {self.epochs} epochs")
-        if self.weights == "average" and not self.average:
-            raise ConfigError("train.weights 'average' needs a weight average: set train.average to N >= 1")
+        f = self.average
+        if isinstance(f, bool) or not isinstance(f, int | float) or not 0 <= f <= 1:
+            raise ConfigError(f"train.average must be a fraction of the epochs in [0, 1] (0: none), "
+                              f"got {f!r}")
+        if self.weights == "average" and not f:
+            raise ConfigError("train.weights 'average' needs a weight average: set train.average > 0")
 
     @property
     def average_from(self) -> int | None:
         """The first epoch whose weights enter the average; None without one."""
-        return self.epochs - self.average + 1 if self.average else None
+        return self.epochs - max(1, math.ceil(self.average * self.epochs)) + 1 if self.average else None
 
     def step_weights(self) -> tuple[float, ...]:
         """The loss weight of each lookahead step, t+1 first."""

@@ -9,8 +9,8 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
                              and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
                              stored, it is rebuilt from the package's pretrained weights
     epoch_0040.safetensors   the weights after an epoch of `TrainConfig.snapshots` (kept on resume)
-    average.safetensors      the mean of the weights after each of the last `TrainConfig.average`
-                             epochs so far (from the window's first epoch on)
+    average.safetensors      the mean of the weights after each epoch of the training's last
+                             fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
                              the epochs averaged)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
