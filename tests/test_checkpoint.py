@@ -65,9 +65,12 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert (policy["decision_hz"], policy["frame_size"]) == (DEFAULT_DECISION_HZ, [308, 410])
     assert policy["actions"] == [-1, 0, 1] and policy["rule"] == "farthest_nearest_bin"
     assert policy["bins"]["clip"] == 2.0
-    # The default Depth-Q-Net: the depth-first head, acting with its final weights; both recorded.
+    # The default Depth-Q-Net: the depth-first head, acting with its last quarter's weight average
+    # (of 1 epoch: its last); all recorded.
     assert (record["train"]["head_form"], record["head"]["form"]) == ("depth_first", "depth_first")
-    assert record["train"]["weights"] == "final" and record["provenance"]["package"] == "depthq"
+    assert (record["train"]["average"], record["train"]["weights"]) == (0.25, "average")
+    assert record["provenance"]["package"] == "depthq"
+    assert _equal(_tensors(a / "ckpt" / "average.safetensors"), _tensors(a / "ckpt" / "last.safetensors"))
 
     b.mkdir()
     shutil.move(a / "ckpt", b / "ckpt")
@@ -84,7 +87,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert "offline metrics skipped: its dataset is not found" in capsys.readouterr().err
     summary = read_json(c / "eval" / "summary.json")
     assert summary["config"]["decision_hz"] == HZ and "offline" not in summary
-    assert summary["runs"][0]["steps"] <= 2 * HZ and summary["policy"]["weights"] == "last"
+    assert summary["runs"][0]["steps"] <= 2 * HZ and summary["policy"]["weights"] == "average"
 
     assert main(["drive", "--policy", ckpt, "--canyon", "eval:0", "--time-limit", "2", "--frames", "2",
                  "--out", "drive", "--json"]) == 0
@@ -327,7 +330,7 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     train(config, split, progress=False)
     assert _equal(_tensors(split / "average.safetensors"), mean)
     with pytest.raises(ConfigError, match=r"no average\.safetensors .* without train\.average"):
-        load_qnet(train(_config(data, epochs=1), tmp_path / "plain", progress=False), "average")
+        load_qnet(train(_config(data, epochs=1, average=0), tmp_path / "plain", progress=False), "average")
 
 
 @pytest.mark.parametrize(

@@ -83,10 +83,10 @@ _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
 # TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
 # there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32 on LiDAR bins; the
-# paper's head, the default until "depth_first" was, and recorded only when it was not), so such a
-# folder still loads and resumes.
+# paper's head, the default until "depth_first" was, and recorded only when it was not; no weight
+# average), so such a folder still loads and resumes.
 _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
-                "head_form": "concat", "labels": "lidar"}
+                "head_form": "concat", "labels": "lidar", "average": 0.0}
 # HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
 # field (action_scale, lookahead, feature_projection, form, output_bias, in that order) or, for `form`,
 # at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33). These are

@@ -37,8 +37,10 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(TrainConfig, args)  # every field from its flag (weights, snapshots, ...)
     out = train(config, args.out, progress=not args.no_progress, device=args.device)
     best, last = read_json(out / "best.json"), read_json(out / "last.json")
+    average = read_json(out / "average.json") if config.average else None
+    also = f", average.safetensors: epochs {average['epochs'][0]}–{average['epochs'][1]}" if average else ""
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "
-          f"last.safetensors: epoch {last['epoch']})")
+          f"last.safetensors: epoch {last['epoch']}{also}; acts with {config.weights})")
     for name, row in (("best", best), ("last", last)):
         print(f"{name}: train_loss {row['train_loss']:.4f}  val_loss {row['val_loss']:.4f}  "
               f"val_loss_std {row['val_loss_std']:.4f}")
