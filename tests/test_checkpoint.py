@@ -135,7 +135,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     # A sweep finds a finished folder trained otherwise than the model of that name now means (the
     # paper's head, before the depth-first head became the default): an error, not a reused model.
     from depthq.pipeline.stages import _trained
-    with pytest.raises(ConfigError, match=r"differs in: head_form, weights"):
+    with pytest.raises(ConfigError, match=r"differs in: average, head_form, weights"):
         _trained(_config(data, epochs=1), out)
     assert _trained(_config(data, epochs=1, head_form="concat"), out)
 
@@ -307,7 +307,9 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
         if value.is_floating_point():
             torch.testing.assert_close(value, sum(s[key] for s in snaps) / 3)
     assert not _equal(mean, snaps[-1])
-    assert read_json(whole / "average.json") == {"epochs": [2, 4], "count": 3}
+    record = read_json(whole / "average.json")  # and the mean's validation loss, its own
+    assert (record["epochs"], record["count"]) == ([2, 4], 3)
+    assert record["val_loss"] > 0 and record["val_loss"] != read_json(whole / "last.json")["val_loss"]
     net, _ = load_qnet(whole, "average")
     assert _equal({f"head.{k}": v for k, v in net.head.state_dict().items()}, mean)
 
@@ -324,11 +326,12 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     with pytest.raises(KeyboardInterrupt):
         train(config, split, progress=False)
     monkeypatch.undo()
-    assert read_json(split / "average.json") == {"epochs": [2, 3], "count": 2}
+    assert read_json(split / "average.json")["epochs"] == [2, 3]
     with pytest.raises(ConfigError, match=r"inside a weight average from epoch 3, but the state holds one"):
         train(_config(data, epochs=8, snapshots=(2, 3, 4), average=0.75), split, progress=False)
     train(config, split, progress=False)
     assert _equal(_tensors(split / "average.safetensors"), mean)
+    assert read_json(split / "average.json") == record
     with pytest.raises(ConfigError, match=r"no average\.safetensors .* without train\.average"):
         load_qnet(train(_config(data, epochs=1, average=0), tmp_path / "plain", progress=False), "average")
 
@@ -338,7 +341,7 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     [
         ({"average": 1.5}, r"train\.average must be a fraction of the epochs in \[0, 1\] .*got 1\.5"),
         ({"average": -1}, r"train\.average must be .*, got -1"),
-        ({"weights": "average"}, r"'average' needs a weight average"),
+        ({"weights": "average", "average": 0}, r"'average' needs a weight average"),
         ({"snapshots": (0,)}, "epoch 0 is not one of"),
         ({"snapshots": (5,)}, r"epoch 5 is not one of this training's epochs 1\.\.2"),
         ({"snapshots": (1, 1)}, r"repeats epoch\(s\) \[1\]"),
@@ -364,9 +367,9 @@ def test_a_sweep_varies_weights_and_snapshots() -> None:
     sweep = replace(get_preset("smoke"), grid=grid)
     depth, coll = sweep.models()[:2]
     # A setting names a model where it differs from that network's own default: a depth-first
-    # Depth-Q-Net selects its final weights unless told, a Coll-Q-Net its best.
+    # Depth-Q-Net acts with its weight average unless told, a Coll-Q-Net with its best weights.
     assert (depth.net, coll.net) == ("depth", "coll")
-    assert depth.name == "depth_n3_s0_epochs3_snapshots1+2"
+    assert depth.name == "depth_n3_s0_selectfinal_epochs3_snapshots1+2"
     # The setting was called `select` when sweeps first named folders after it: they keep its name.
     assert coll.name == "coll_n3_s0_selectfinal_epochs3_snapshots1+2"
     for model in (depth, coll):

@@ -178,20 +178,20 @@ def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
 
 
 def test_a_variant_names_each_networks_models_by_what_differs_from_its_own_default() -> None:
-    """The paper's protocol (epochs=200, select=final): Depth-Q-Net acts with its final weights by
-    default, so only its epochs name its folders; Coll-Q-Net's name both. `oracle_gap paired --set`
-    finds a sweep's models by the same names."""
+    """200 epochs, best weights (select=best, the setting's old name): Coll-Q-Net acts with its best
+    weights by default, so only its epochs name its folders; Depth-Q-Net's (its weight average by
+    default) name both. `oracle_gap paired --set` finds a sweep's models by the same names."""
     from depthq.experiments import oracle_gap
     from depthq.pipeline.presets import get_preset
     from depthq.pipeline.sweep import differing, parse_setting, widened
 
-    grid = (parse_setting("epochs=200"), parse_setting("select=final"))
+    grid = (parse_setting("epochs=200"), parse_setting("select=best"))
     sweep = widened(get_preset("smoke"), grid=grid)
     assert sorted(m.name for m in sweep.models() if m.runs == 6) == [
-        "coll_n6_s0_epochs200_selectfinal", "depth_n6_s0_epochs200"]
-    variant = (("epochs", 200), ("weights", "final"))
-    assert differing("depth", variant) == (("epochs", 200),)
-    assert differing("coll", variant, sweep.train) == variant
+        "coll_n6_s0_epochs200", "depth_n6_s0_epochs200_selectbest"]
+    variant = (("epochs", 200), ("weights", "best"))
+    assert differing("coll", variant) == (("epochs", 200),)
+    assert differing("depth", variant, sweep.train) == variant
     assert oracle_gap.main(["paired", "runs/none", "--set", "epochs=100,200"]) == 2  # one value each
     assert oracle_gap.main(["paired", "runs/none", "--set", "epochs=100"]) == 2  # no sweep folder
 

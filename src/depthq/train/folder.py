@@ -12,7 +12,7 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
     average.safetensors      the mean of the weights after each epoch of the training's last
                              fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
-                             the epochs averaged)
+                             the epochs averaged, their count, the mean's validation loss)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
                              ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
@@ -181,10 +181,12 @@ def save_epoch(
     snapshot: bool = False,
     average: AveragedModel | None = None,
     average_from: int | None = None,
+    average_loss: tuple[float, float] | None = None,
 ) -> None:
     """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
     also as epoch_NNNN.safetensors; `average`, once it holds epochs from `average_from` on: also
-    average.safetensors), metrics and logs."""
+    average.safetensors, and its validation loss and spread `average_loss` in average.json), metrics
+    and logs."""
     weights = trainable_state(model)
     averaged = int(average.n_averaged) if average is not None else 0
     optim = optimizer.state_dict()
@@ -212,7 +214,8 @@ def save_epoch(
         write_json(out / f"{stem}.json", state.history[-1])
     if averaged:
         atomic_write_bytes(out / "average.safetensors", weights_bytes(mean, {"epoch": str(state.epoch)}))
-        write_json(out / "average.json", {"epochs": [average_from, state.epoch], "count": averaged})
+        val = dict(zip(("val_loss", "val_loss_std"), average_loss, strict=True)) if average_loss else {}
+        write_json(out / "average.json", {"epochs": [average_from, state.epoch], "count": averaged, **val})
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()

@@ -100,29 +100,23 @@ def train(
                 train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer, config.precision))
                 _check_finite(train_losses[-1], "training", epoch, out, state)
 
-            model.eval()  # no dropout; a trained trunk's BatchNorm uses its running statistics
-            val_losses, val_stds = [], []
-            with torch.no_grad():
-                for idx in val_batches:
-                    batch = with_target(val_set.batch(idx).to(where), target_head, config.bootstrap)
-                    pred = predict(model, val_set, batch, config.precision)
-                    loss, per_sample = loss_fn(pred, batch.targets)
-                    val_losses.append(loss.item())
-                    val_stds.append(per_sample.std().item())
+            val_loss, val_loss_std = validate(model, val_set, val_batches, loss_fn, target_head, config)
             row = {
                 "epoch": epoch,
                 "train_loss": float(np.mean(train_losses)),
-                "val_loss": float(np.mean(val_losses)),
-                "val_loss_std": float(np.mean(val_stds)),  # the paper's over-fitting signal (Fig. 5)
+                "val_loss": val_loss,
+                "val_loss_std": val_loss_std,  # the paper's over-fitting signal (Fig. 5)
                 "seconds": round(time.perf_counter() - start, 3),
             }
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
             state = folder.TrainState(epoch, [*state.history, row], row if is_best else state.best)
+            averaged = None
             if average is not None and epoch >= config.average_from:
                 average.update_parameters(model)
+                averaged = validate(average.module, val_set, val_batches, loss_fn, target_head, config)
             folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
-                              average, config.average_from)
+                              average, config.average_from, averaged)
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
@@ -131,6 +125,25 @@ def train(
         bar.close()
         tb.close()
     return out
+
+
+def validate(
+    model: QNet, val_set: Samples, val_batches: tuple[torch.Tensor, ...], loss_fn: LossFn,
+    target_head: Head | None, config: TrainConfig,
+) -> tuple[float, float]:
+    """The mean validation loss of `model` over the fixed validation batches, and its mean per-batch
+    standard deviation over the samples; in eval mode (no dropout; a trained trunk's BatchNorm uses
+    its running statistics)."""
+    model.eval()
+    where = next(model.parameters()).device
+    losses, stds = [], []
+    with torch.no_grad():
+        for idx in val_batches:
+            batch = with_target(val_set.batch(idx).to(where), target_head, config.bootstrap)
+            loss, per_sample = loss_fn(predict(model, val_set, batch, config.precision), batch.targets)
+            losses.append(loss.item())
+            stds.append(per_sample.std().item())
+    return float(np.mean(losses)), float(np.mean(stds))
 
 
 def loss_function(config: TrainConfig) -> LossFn:
