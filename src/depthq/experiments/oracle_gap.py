@@ -431,10 +431,13 @@ def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[floa
 
 
 def _sweep_train(sweep: Path) -> Settings:
-    """The training settings every model of a sweep folder has (its setup's, as `Sweep.train`)."""
+    """The training settings every model of a sweep folder has (its setup's, as `Sweep.train`); none
+    for a folder of evaluations alone (no reproduce.json, e.g. models driven in fresh canyons)."""
     marker = Path(sweep) / "reproduce.json"
+    if not Path(sweep).is_dir():
+        raise ConfigError(f"{sweep}: no such folder")
     if not marker.is_file():
-        raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json)")
+        return ()
     setup = read_json(marker)["sweep"]
     keys = ("epochs", "train_batches", "val_batches")
     return tuple((k, setup[k]) for k in keys if setup.get(k) is not None)
@@ -460,7 +463,10 @@ def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
                     pattern: str = PATTERN, variant: Variant = ()) -> dict[str, str]:
     """The paired comparison in words, one sentence per size, keyed by where it was measured
     ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
-    record = read_json(Path(sweep) / "reproduce.json")["sweep"]
+    marker = Path(sweep) / "reproduce.json"
+    if not marker.is_file():
+        raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json), so it names no canyons to claim")
+    record = read_json(marker)["sweep"]
     out = {}
     for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
         coll, depth, diff = _columns(both, "distance_to_collision_mean")
