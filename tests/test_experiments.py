@@ -114,7 +114,7 @@ def test_training_length_drives_every_snapshot_beside_its_validation_loss(
     shutil.copytree(smoke, out)
     setup = oracle_gap.Setup(preset="smoke", canyons=None, runs=6, sizes=(6,), seeds=(0,))
     assert training_length.run(out, setup, 3, (1,), average=True) == 0
-    model = "depth_n6_s0_epochs3_snapshots1"
+    model = "depth_n6_s0_epochs3_snapshots1_average0"
     assert (out / "models" / model / "epoch_0001.safetensors").is_file()
     points = training_length.rows(out, setup, 3, (1,), average=True)
     assert [p["epoch"] for p in points] == [1, 3, "mean"]

@@ -63,9 +63,12 @@ COLUMNS = (  # the table's diagnostics: title, key of the agreement summary, for
 
 
 def candidate(epochs: int, snapshots: tuple[int, ...], net: str = "depth") -> Candidate:
-    """The sweep variant that trains `epochs` and keeps the `snapshots`' weights."""
+    """The sweep variant that trains `epochs` and keeps the `snapshots`' weights. Its last point is
+    one epoch's weights too: a Depth-Q-Net's final ones (average=0, the depth-first default's weight
+    average left out), a Coll-Q-Net's best."""
     kept = "+".join(map(str, snapshots))
-    return Candidate(f"{epochs} epochs", (f"epochs={epochs}", f"snapshots={kept}"), net)
+    final = ("average=0",) if net == "depth" else ()
+    return Candidate(f"{epochs} epochs", (f"epochs={epochs}", f"snapshots={kept}", *final), net)
 
 
 def averaged_name(model: str) -> str:
