@@ -153,8 +153,8 @@ class TrainConfig:
     # f > 0 also keeps the mean of the weights after each epoch of the training's last fraction f
     # (0.25 of 40 epochs: 31–40; at least the last epoch) as average.safetensors (`--weights
     # average`): stochastic weight averaging's equal-weight mean (torch's `swa_utils.AveragedModel`), a
-    # smoother draw of the training's end than one epoch's weights (docs/design.md#weight-average).
-    # Training is the same either way. None: 0.25 for a depth_first head, else 0 (none).
+    # smoother draw of the training's end than one epoch's weights; none: 0.25 for a depth_first head,
+    # else 0 (none). Training is the same either way (docs/design.md#weight-average).
     average: float | None = None
     # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
     # gradients, loss and Adadelta stay float32); "fp32": float32 throughout. Policies decide in float32.
