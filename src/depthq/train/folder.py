@@ -180,15 +180,15 @@ def save_epoch(
     is_best: bool,
     snapshot: bool = False,
     average: AveragedModel | None = None,
-    average_from: int | None = None,
     average_loss: tuple[float, float] | None = None,
 ) -> None:
     """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
-    also as epoch_NNNN.safetensors; `average`, once it holds epochs from `average_from` on: also
-    average.safetensors, and its validation loss and spread `average_loss` in average.json), metrics
-    and logs."""
+    also as epoch_NNNN.safetensors; `average`, once it holds an epoch, one per epoch up to this one:
+    also average.safetensors, and its validation loss and spread `average_loss` in average.json),
+    metrics and logs."""
     weights = trainable_state(model)
     averaged = int(average.n_averaged) if average is not None else 0
+    average_from = state.epoch - averaged + 1  # the average holds every epoch since its first
     optim = optimizer.state_dict()
     tensors = {f"model.{k}": v for k, v in weights.items()}
     for param, values in optim["state"].items():

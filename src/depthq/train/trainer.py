@@ -111,12 +111,12 @@ def train(
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
             state = folder.TrainState(epoch, [*state.history, row], row if is_best else state.best)
-            averaged = None
+            average_loss = None
             if average is not None and epoch >= config.average_from:
                 average.update_parameters(model)
-                averaged = validate(average.module, val_set, val_batches, loss_fn, target_head, config)
+                average_loss = validate(average.module, val_set, val_batches, loss_fn, target_head, config)
             folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
-                              average, config.average_from, averaged)
+                              average, average_loss)
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
