@@ -28,6 +28,7 @@ VERBS: dict[str, str] = {
     "probe": "probe",
     "export": "export",
     "bag": "bag",
+    "ros": "ros",
     "host": "host",
 }
 

@@ -1,19 +1,25 @@
-"""What a robot's node does with each camera frame: decode it, decide, command. Free of ROS, so it is
-tested here (rclpy cannot be installed from PyPI); `examples/turtlebot3_ros2.py` is the thin node
-around it."""
+"""What a robot's node does, free of ROS: keep the newest camera frame, decide on it at the policy's
+own rate, stop the robot when frames stop. `RobotDriver` is the one core that both thin nodes call,
+`depthq ros drive` (ROS 1, `depthq.deploy.ros_drive`) and `examples/turtlebot3_ros2.py` (ROS 2);
+docs/robot.md#ros-drive says how it behaves.
+"""
 
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
+import math
+import statistics
+import threading
+from dataclasses import dataclass, field
 
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from depthq.control.policy import Policy
-from depthq.errors import DataError
+from depthq.errors import ConfigError, DataError
 
 LINEAR_SPEED = 0.5  # m/s, the paper's constant forward speed
+RAW_ENCODINGS = ("rgb8", "bgr8", "mono8")  # the `sensor_msgs/Image` encodings a camera driver gives
 
 
 @dataclass(frozen=True)
@@ -22,6 +28,23 @@ class Twist:
 
     linear_x: float
     angular_z: float
+
+
+STOP = Twist(0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera message as a node received it: a `sensor_msgs/CompressedImage` (`encoding` None:
+    JPEG or PNG `data`) or a `sensor_msgs/Image` (`encoding` one of RAW_ENCODINGS, rows of `step`
+    bytes). `stamp`: its header's time, s, on the clock the node runs on."""
+
+    stamp: float
+    data: bytes
+    encoding: str | None = None
+    height: int = 0
+    width: int = 0
+    step: int = 0
 
 
 def decode_frame(data: bytes) -> np.ndarray:
@@ -33,6 +56,197 @@ def decode_frame(data: bytes) -> np.ndarray:
         raise DataError(f"camera frame: not a JPEG or PNG image ({len(data)} bytes: {err})") from err
 
 
+def decode_raw(data: bytes, encoding: str, height: int, width: int, step: int) -> np.ndarray:
+    """A `sensor_msgs/Image` (rgb8, bgr8 or mono8; rows `step` bytes apart) → uint8 RGB (H, W, 3)."""
+    if encoding not in RAW_ENCODINGS:
+        raise DataError(f"camera frame: encoding {encoding!r} is not one of {RAW_ENCODINGS}")
+    channels = 1 if encoding == "mono8" else 3
+    if height < 1 or width < 1 or step < width * channels or len(data) < step * height:
+        raise DataError(
+            f"camera frame: {len(data)} bytes do not hold a {encoding} image of {height}×{width}, step {step}"
+        )
+    rows = np.frombuffer(data, np.uint8, count=step * height).reshape(height, step)
+    pixels = rows[:, : width * channels].reshape(height, width, channels)
+    if encoding == "mono8":
+        return np.repeat(pixels, 3, axis=2)
+    return np.ascontiguousarray(pixels[..., ::-1] if encoding == "bgr8" else pixels)
+
+
+def decode(frame: Frame) -> np.ndarray:
+    """A received camera message's image, uint8 RGB (H, W, 3)."""
+    if frame.encoding is None:
+        return decode_frame(frame.data)
+    return decode_raw(frame.data, frame.encoding, frame.height, frame.width, frame.step)
+
+
+def fit(image: np.ndarray, frame_size: tuple[int, int] | None) -> np.ndarray:
+    """`image` at the frame size a policy's graph takes (None: any size, as a checkpoint's), resized with
+    Pillow's bilinear filter: the fixed-point resize the ONNX graph and `depthq.nets.trunk.preprocess` do
+    (exact only in one resize: export the graph at the camera's size, `depthq export --frame-size`)."""
+    if frame_size is None or image.shape[:2] == tuple(frame_size):
+        return image
+    height, width = frame_size
+    return np.asarray(Image.fromarray(image).resize((width, height), Image.Resampling.BILINEAR))
+
+
+def robot_policy(
+    spec: str, weights: str | None = None, device: str = "cpu", hz: float | None = None
+) -> tuple[Policy, float, tuple[int, int] | None]:
+    """A learned policy for a robot, 'onnx:PATH' or a checkpoint folder: (the policy, the decision rate
+    it was trained at (`hz` if given), the frame size its graph takes, None for a checkpoint's: any)."""
+    from depthq.policies.spec import PolicySpec
+
+    parsed = PolicySpec.parse(spec)
+    if parsed.kind == "onnx":
+        from depthq.policies.onnx import OnnxPolicy  # onnxruntime and numpy only, as on a robot
+
+        policy = OnnxPolicy(parsed.path)
+        rate = hz or policy.decision_hz
+        if rate is None:
+            raise ConfigError(f"{parsed.path}: records no decision rate (an older export); give --hz")
+        return policy, rate, policy.frame_size
+    if parsed.checkpoint is None:
+        raise ConfigError(f"a robot drives a learned policy, a checkpoint folder or onnx:PATH; got {spec!r}")
+    from depthq.nets.checkpoint import policy_record, read_config
+    from depthq.policies.qnet import QNetPolicy
+
+    policy = QNetPolicy.from_checkpoint(parsed.checkpoint, weights=weights, device=device)
+    return policy, hz or policy_record(read_config(parsed.checkpoint)).decision_hz, None
+
+
 def twist_for_frame(policy: Policy, frame: np.ndarray) -> Twist:
-    """One decision per frame: drive forward at LINEAR_SPEED, steer as the policy says."""
+    """One decision: drive forward at LINEAR_SPEED, steer as the policy says on `frame`."""
     return Twist(LINEAR_SPEED, float(policy.act({"image": frame})))
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """How the node drives. `decision_hz`: the policy's trained rate (its checkpoint or ONNX metadata).
+    `watchdog_s`: the longest the robot drives on without a fresh frame; `max_age_s`: a frame older than
+    this (now − its stamp) is not decided on and is not fresh; `check_hz`: how often the node looks."""
+
+    decision_hz: float
+    watchdog_s: float = 0.5
+    max_age_s: float = 0.5
+    check_hz: float = 50.0
+
+    def __post_init__(self) -> None:
+        if not self.decision_hz > 0:
+            raise ConfigError(f"the decision rate must be > 0 Hz, got {self.decision_hz}")
+        if not self.check_hz >= 2 * self.decision_hz:
+            raise ConfigError(f"--check-hz must be at least twice the decision rate, got {self.check_hz}")
+        if not self.watchdog_s > 1.0 / self.check_hz:
+            raise ConfigError(f"--watchdog must be > 1/check_hz , got {self.watchdog_s}")
+        if not self.max_age_s > 0:
+            raise ConfigError(f"--max-age must be > 0 s, got {self.max_age_s}")
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.decision_hz
+
+
+@dataclass(frozen=True)
+class Command:
+    """What to publish: `twist`, and why ("decision" on the frame stamped `stamp`, "watchdog", "stop")."""
+
+    twist: Twist
+    reason: str
+    stamp: float | None = None
+
+
+@dataclass
+class DriverStats:
+    """What the node logs: decisions, their latencies (frame stamp → command published, s), stops."""
+
+    decisions: int = 0
+    skipped: int = 0  # decision times without a new fresh frame (the last command held)
+    stale: int = 0  # frames dropped as older than max_age_s
+    watchdog_stops: int = 0
+    latencies: list[float] = field(default_factory=list)
+    first: float | None = None  # the clock's time at the first and last decision
+    last: float | None = None
+
+    @property
+    def rate(self) -> float:
+        """Decisions per second between the first and the last."""
+        if self.first is None or self.last is None or self.last <= self.first:
+            return math.nan
+        return (self.decisions - 1) / (self.last - self.first)
+
+    def line(self) -> str:
+        lat = sorted(self.latencies) or [math.nan]
+        return (
+            f"{self.decisions} decisions at {self.rate:.2f} Hz, latency frame→command median "
+            f"{1e3 * statistics.median(lat):.0f} ms (max {1e3 * lat[-1]:.0f} ms), {self.skipped} times no "
+            f"new frame, {self.stale} stale frames, {self.watchdog_stops} watchdog stops"
+        )
+
+
+class RobotDriver:
+    """The node's logic. The camera callback calls `on_frame` (any thread: it only keeps the newest
+    frame, decoded later and only if decided on); a timer calls `tick(now)` at `config.check_hz`, which
+    returns the command to publish, if any: a decision at every decision time (the policy's rate) on the
+    newest fresh frame not yet decided on, or one zero twist once no fresh frame came for `watchdog_s`.
+    `stop()` is the command on shutdown."""
+
+    def __init__(
+        self, policy: Policy, config: DriverConfig, frame_size: tuple[int, int] | None = None
+    ) -> None:
+        """`frame_size`: the frame an ONNX graph takes (`OnnxPolicy.frame_size`); None for a checkpoint."""
+        self.policy, self.config, self.frame_size = policy, config, frame_size
+        self.stats = DriverStats()
+        self._lock = threading.Lock()
+        self._newest: Frame | None = None
+        self._fresh_at: float | None = None  # when the last fresh frame was received
+        self._decided: float | None = None  # the stamp of the last frame decided on
+        self._next: float | None = None  # the next decision time
+        self._stopped = True  # the last command was a zero twist (or none was sent)
+
+    def on_frame(self, frame: Frame, now: float) -> None:
+        """Keep `frame` if it is fresh (its stamp within max_age_s of `now`, the receipt time)."""
+        if now - frame.stamp > self.config.max_age_s:
+            self.stats.stale += 1
+            return
+        with self._lock:
+            if self._newest is None or frame.stamp >= self._newest.stamp:
+                self._newest, self._fresh_at = frame, now
+
+    def tick(self, now: float) -> Command | None:
+        """The command to publish at `now` (the node's clock, as the stamps), or None."""
+        cfg = self.config
+        with self._lock:
+            frame, fresh_at = self._newest, self._fresh_at
+        # The zero twist is out before watchdog_s passes without a fresh frame, whatever the tick's phase.
+        silent = fresh_at is None or now - fresh_at >= cfg.watchdog_s - 1.0 / cfg.check_hz
+        due = self._next is None or now >= self._next
+        if due:
+            self._next = now + cfg.period if self._next is None or now - self._next > cfg.period else (
+                self._next + cfg.period)
+        if silent:
+            if self._stopped:
+                return None
+            self.stats.watchdog_stops += 1
+            self._stopped = True
+            return Command(STOP, "watchdog")
+        if not due:
+            return None
+        if frame is None or frame.stamp == self._decided or now - frame.stamp > cfg.max_age_s:
+            self.stats.skipped += 1
+            return None
+        self._decided = frame.stamp
+        twist = twist_for_frame(self.policy, fit(decode(frame), self.frame_size))
+        self._stopped = False
+        return Command(twist, "decision", frame.stamp)
+
+    def published(self, command: Command, now: float) -> None:
+        """Count a published decision and its latency (`now`: after publishing, the node's clock)."""
+        if command.stamp is None:
+            return
+        self.stats.decisions += 1
+        self.stats.latencies.append(now - command.stamp)
+        self.stats.first = now if self.stats.first is None else self.stats.first
+        self.stats.last = now
+
+    def stop(self) -> Command:
+        self._stopped = True
+        return Command(STOP, "stop")

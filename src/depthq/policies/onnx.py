@@ -48,7 +48,10 @@ class OnnxPolicy(GreedyPolicy):
             actions = np.asarray(json.loads(meta["depthq.actions"]), np.float64)
             self.frame_size = tuple(json.loads(meta["depthq.frame_size"]))
             lookahead = int(meta.get("depthq.lookahead", "1"))
-        except (KeyError, ValueError) as err:
+            # The rate its training data was collected at (a robot decides at it); None: not recorded.
+            record = json.loads(meta.get("depthq.config", "{}"))
+            self.decision_hz = float(record["policy"]["decision_hz"]) if "policy" in record else None
+        except (KeyError, ValueError, TypeError) as err:
             raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
         self._set_candidates(kind, actions, lookahead, selection)
         self._actions = self.candidates.astype(np.float32)

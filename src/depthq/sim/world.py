@@ -212,10 +212,15 @@ class CanyonWorld:
         Velocity control: the body's planar velocity is set every physics step (diff drive without
         slip), MuJoCo integrates it and detects contacts. The run stops at the first contact.
         """
-        m, d, v = self.model, self.data, self.config.speed
-        for _ in range(self.config.substeps):
+        return self.drive(self.config.speed, yaw_rate, self.config.substeps)
+
+    def drive(self, speed: float, yaw_rate: float, steps: int = 1) -> bool:
+        """`steps` physics steps at `speed` (m/s, forward) and `yaw_rate` as `advance` drives them: a
+        robot moved by its velocity commands (`depthq ros sim`); True on contact with a wall."""
+        m, d = self.model, self.data
+        for _ in range(steps):
             yaw = d.qpos[2]
-            d.qvel[:] = (v * math.cos(yaw), v * math.sin(yaw), yaw_rate)
+            d.qvel[:] = (speed * math.cos(yaw), speed * math.sin(yaw), yaw_rate)
             mujoco.mj_step(m, d)
             if d.ncon:
                 return True
