@@ -25,7 +25,7 @@ from depthq.sim.world import WorldConfig, world_for
 
 LDS01_HZ = 5.0  # the TurtleBot3 LiDAR's scans per second
 ODOM_HZ = 30.0  # turtlebot3_core's odometry rate
-CLOCK_HZ = 100.0  # /clock messages per simulated second
+CLOCK_HZ = 200.0  # /clock messages per simulated second
 
 
 @dataclass(frozen=True)

@@ -29,35 +29,18 @@ import json
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import nn
 
 from depthq import __version__
 from depthq.configio import atomic_write_bytes
 from depthq.control.action_selection import RULES, candidate_sequences
+from depthq.deploy.resize import resize_weights
 from depthq.errors import ConfigError
 from depthq.nets.checkpoint import load_qnet, policy_record
 from depthq.nets.heads import QNet
 
 OPSET = 18
-
-
-def resize_weights(in_size: int, out_size: int) -> tuple[np.ndarray, int]:
-    """Integer weights (out_size, in_size) and their precision in bits of PyTorch's uint8 antialiased
-    bilinear resize along one axis (Pillow's algorithm: triangle filter widened by the scale)."""
-    scale = in_size / out_size
-    support, stretch = (scale, 1.0 / scale) if scale >= 1 else (1.0, 1.0)
-    weights = np.zeros((out_size, in_size))
-    for i in range(out_size):
-        center = scale * (i + 0.5)
-        lo, hi = max(int(center - support + 0.5), 0), min(int(center + support + 0.5), in_size)
-        w = np.maximum(0.0, 1.0 - np.abs((np.arange(lo, hi) - center + 0.5) * stretch))
-        weights[i, lo:hi] = w / w.sum()
-    bits = 0
-    while bits < 22 and int(0.5 + weights.max() * (1 << (bits + 1))) < (1 << 15):
-        bits += 1
-    return np.trunc(weights * (1 << bits) + 0.5), bits  # weights ≥ 0: round half up
 
 
 class FrameResize(nn.Module):

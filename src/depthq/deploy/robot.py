@@ -16,6 +16,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from depthq.control.policy import Policy
+from depthq.deploy.resize import resize_frame
 from depthq.errors import ConfigError, DataError
 
 LINEAR_SPEED = 0.5  # m/s, the paper's constant forward speed
@@ -80,13 +81,13 @@ def decode(frame: Frame) -> np.ndarray:
 
 
 def fit(image: np.ndarray, frame_size: tuple[int, int] | None) -> np.ndarray:
-    """`image` at the frame size a policy's graph takes (None: any size, as a checkpoint's), resized with
-    Pillow's bilinear filter: the fixed-point resize the ONNX graph and `depthq.nets.trunk.preprocess` do
-    (exact only in one resize: export the graph at the camera's size, `depthq export --frame-size`)."""
+    """`image` at the frame size a policy's graph takes (None: any size, as a checkpoint's), resized as
+    the graph and `depthq.nets.trunk.preprocess` resize (`depthq.deploy.resize`). Two resizes are not
+    one: for a graph that sees the camera's frames as the checkpoint does, export it at the camera's
+    size (`depthq export --frame-size HxW`)."""
     if frame_size is None or image.shape[:2] == tuple(frame_size):
         return image
-    height, width = frame_size
-    return np.asarray(Image.fromarray(image).resize((width, height), Image.Resampling.BILINEAR))
+    return resize_frame(image, frame_size)
 
 
 def robot_policy(
@@ -122,8 +123,9 @@ def twist_for_frame(policy: Policy, frame: np.ndarray) -> Twist:
 @dataclass(frozen=True)
 class DriverConfig:
     """How the node drives. `decision_hz`: the policy's trained rate (its checkpoint or ONNX metadata).
-    `watchdog_s`: the longest the robot drives on without a fresh frame; `max_age_s`: a frame older than
-    this (now − its stamp) is not decided on and is not fresh; `check_hz`: how often the node looks."""
+    `watchdog_s`: the longest the robot drives on after the newest fresh frame was taken; `max_age_s`: a
+    frame older than this (now − its stamp) on arrival or at a decision is not decided on; `check_hz`:
+    how often the node looks. Stamps and the node's clock must agree (one machine, or NTP/chrony)."""
 
     decision_hz: float
     watchdog_s: float = 0.5
@@ -135,8 +137,8 @@ class DriverConfig:
             raise ConfigError(f"the decision rate must be > 0 Hz, got {self.decision_hz}")
         if not self.check_hz >= 2 * self.decision_hz:
             raise ConfigError(f"--check-hz must be at least twice the decision rate, got {self.check_hz}")
-        if not self.watchdog_s > 1.0 / self.check_hz:
-            raise ConfigError(f"--watchdog must be > 1/check_hz , got {self.watchdog_s}")
+        if not self.watchdog_s > 2.0 / self.check_hz:
+            raise ConfigError(f"--watchdog must be > two check periods, got {self.watchdog_s}")
         if not self.max_age_s > 0:
             raise ConfigError(f"--max-age must be > 0 s, got {self.max_age_s}")
 
@@ -186,8 +188,8 @@ class RobotDriver:
     """The node's logic. The camera callback calls `on_frame` (any thread: it only keeps the newest
     frame, decoded later and only if decided on); a timer calls `tick(now)` at `config.check_hz`, which
     returns the command to publish, if any: a decision at every decision time (the policy's rate) on the
-    newest fresh frame not yet decided on, or one zero twist once no fresh frame came for `watchdog_s`.
-    `stop()` is the command on shutdown."""
+    newest fresh frame not yet decided on, or one zero twist once the newest fresh frame is `watchdog_s` old.
+    `stop()` is the command on shutdown, after which no tick commands anything."""
 
     def __init__(
         self, policy: Policy, config: DriverConfig, frame_size: tuple[int, int] | None = None
@@ -197,10 +199,10 @@ class RobotDriver:
         self.stats = DriverStats()
         self._lock = threading.Lock()
         self._newest: Frame | None = None
-        self._fresh_at: float | None = None  # when the last fresh frame was received
         self._decided: float | None = None  # the stamp of the last frame decided on
         self._next: float | None = None  # the next decision time
         self._stopped = True  # the last command was a zero twist (or none was sent)
+        self._shut = False  # `stop` was called: nothing moves the robot again
 
     def on_frame(self, frame: Frame, now: float) -> None:
         """Keep `frame` if it is fresh (its stamp within max_age_s of `now`, the receipt time)."""
@@ -209,15 +211,18 @@ class RobotDriver:
             return
         with self._lock:
             if self._newest is None or frame.stamp >= self._newest.stamp:
-                self._newest, self._fresh_at = frame, now
+                self._newest = frame
 
     def tick(self, now: float) -> Command | None:
         """The command to publish at `now` (the node's clock, as the stamps), or None."""
         cfg = self.config
         with self._lock:
-            frame, fresh_at = self._newest, self._fresh_at
-        # The zero twist is out before watchdog_s passes without a fresh frame, whatever the tick's phase.
-        silent = fresh_at is None or now - fresh_at >= cfg.watchdog_s - 1.0 / cfg.check_hz
+            if self._shut:
+                return None
+            frame = self._newest
+        # Counted from the newest frame's stamp (when it was taken), the zero twist leaves between two
+        # and one check periods before watchdog_s, whatever the tick's phase: it reaches the robot by then.
+        silent = frame is None or now - frame.stamp >= cfg.watchdog_s - 2.0 / cfg.check_hz
         due = self._next is None or now >= self._next
         if due:
             self._next = now + cfg.period if self._next is None or now - self._next > cfg.period else (
@@ -230,7 +235,7 @@ class RobotDriver:
             return Command(STOP, "watchdog")
         if not due:
             return None
-        if frame is None or frame.stamp == self._decided or now - frame.stamp > cfg.max_age_s:
+        if frame.stamp == self._decided or now - frame.stamp > cfg.max_age_s:
             self.stats.skipped += 1
             return None
         self._decided = frame.stamp
@@ -248,5 +253,7 @@ class RobotDriver:
         self.stats.last = now
 
     def stop(self) -> Command:
-        self._stopped = True
+        """The zero twist to publish on shutdown; every later `tick` returns None."""
+        with self._lock:
+            self._stopped = self._shut = True
         return Command(STOP, "stop")

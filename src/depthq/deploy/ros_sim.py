@@ -6,7 +6,7 @@ Publishes, stamped with the simulated time:
     /scan                         sensor_msgs/LaserScan        the LDS-01's 360 beams, 1° apart from ahead
                                                                counter-clockwise, 5 Hz
     /odom                         nav_msgs/Odometry            pose and velocity, 30 Hz
-    /clock                        rosgraph_msgs/Clock          the simulated time, 100 Hz
+    /clock                        rosgraph_msgs/Clock          the simulated time, 200 Hz
     /collision                    std_msgs/String              "bump" or "contact", the run's end (latched)
 
 and moves the robot by the last `geometry_msgs/Twist` on /cmd_vel. It sets the master's
