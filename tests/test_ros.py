@@ -8,15 +8,10 @@ not installed those tests are skipped, saying so."""
 from __future__ import annotations
 
 import io
-import json
-import os
 import re
 import shutil
-import signal
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +35,7 @@ from depthq.deploy.robot import (
     robot_policy,
 )
 from depthq.deploy.ros1 import DEBIAN_PACKAGES
+from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.errors import ConfigError, DataError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -242,76 +238,6 @@ def test_rospy_comes_from_the_system_without_shadowing_the_environments_packages
 # -- the closed loop through a real master -----------------------------------------------------------------
 
 
-class _Graph:
-    """roscore on a free port and the processes started against it, all stopped by `close`, whatever
-    happened (each in its own process group: SIGINT, then SIGKILL after a grace period)."""
-
-    def __init__(self, tmp: Path) -> None:
-        with socket.socket() as s:
-            s.bind(("localhost", 0))
-            self.port = s.getsockname()[1]
-        self.tmp = tmp
-        self.env = {**os.environ, "ROS_MASTER_URI": f"http://localhost:{self.port}", "PYTHONUNBUFFERED": "1",
-                    "ROS_HOME": str(tmp / "ros"), "ROS_LOG_DIR": str(tmp / "ros" / "log")}
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.start("roscore", ["roscore", "-p", str(self.port)])
-        self.wait_for(lambda: self._master_up(), 30, "roscore")
-
-    def _master_up(self) -> bool:
-        with socket.socket() as s:
-            return s.connect_ex(("localhost", self.port)) == 0
-
-    def start(self, name: str, argv: list[str]) -> subprocess.Popen:
-        log = open(self.tmp / f"{name}.log", "w")  # noqa: SIM115  (closed with the process)
-        self.procs[name] = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=self.env,
-                                            cwd=self.tmp, start_new_session=True)
-        return self.procs[name]
-
-    def log(self, name: str) -> str:
-        return (self.tmp / f"{name}.log").read_text()
-
-    def depthq(self, name: str, *args: str) -> subprocess.Popen:
-        return self.start(name, [sys.executable, "-m", "depthq.cli", *args])
-
-    def wait_for(self, ready, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not ready():
-            dead = [n for n, p in self.procs.items() if p.poll() not in (0, None)]
-            assert not dead, f"{dead} died: {[self.log(n)[-2000:] for n in dead]}"
-            assert time.monotonic() < deadline, f"{what}: not within {timeout} s; logs: " + " | ".join(
-                f"{n}: {self.log(n)[-1500:]}" for n in self.procs)
-            time.sleep(0.1)
-
-    def finish(self, name: str, timeout: float) -> str:
-        self.procs[name].wait(timeout=timeout)
-        return self.log(name)
-
-    def stop(self, name: str, grace: float = 10.0) -> None:
-        proc = self.procs[name]
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGINT)
-            try:
-                proc.wait(timeout=grace)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-
-    def close(self) -> None:
-        for name in reversed(list(self.procs)):  # roscore last
-            self.stop(name)
-        assert not self._master_up(), f"a master still answers on port {self.port}"
-
-
-def _summary(log: str) -> dict:
-    return json.loads(next(line for line in reversed(log.splitlines()) if line.startswith("{")))
-
-
-def _decisions(log: str) -> tuple[int, float]:
-    """The drive node's last logged decision count and rate."""
-    found = re.findall(r"(\d+) decisions at ([\d.na]+) Hz", log)
-    return (int(found[-1][0]), float(found[-1][1])) if found else (0, float("nan"))
-
-
 @pytest.mark.slow
 @needs_ros
 def test_a_policy_drives_the_simulated_robot_through_a_real_master(
@@ -322,8 +248,7 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
     within 0.5 s of its last frame."""
     from rosbags.highlevel import AnyReader
 
-    graph = _Graph(tmp_path)
-    try:
+    with RosGraph(tmp_path) as graph:
         sim = ["ros", "sim", "--canyon", "val:1000", "--json"]
         drive = ["ros", "drive", "--policy", str(toy_nets["depth"]), "--log-every", "0.5"]
         graph.depthq("sim", *sim, "--time-limit", "6")
@@ -331,15 +256,14 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
         topics = ["/camera/image_raw/compressed", "/scan", "/cmd_vel", "/odom"]
         graph.start("bag", ["rosbag", "record", "-O", str(tmp_path / "run.bag"), *topics])
         graph.depthq("drive", *drive)
-        graph.wait_for(lambda: _decisions(graph.log("drive"))[0] >= 10, 60, "ten decisions")
-        subprocess.run(["rosnode", "kill", "/depthq_drive"], env=graph.env, timeout=30, check=True,
-                       capture_output=True)
+        graph.wait_for(lambda: decisions(graph.log("drive"))[0] >= 10, 60, "ten decisions")
+        graph.run("rosnode", "kill", "/depthq_drive")
         graph.finish("drive", 20)
-        first = _summary(graph.finish("sim", 60))
+        first = summary(graph.finish("sim", 60))
         graph.stop("bag")
         assert graph.procs["drive"].returncode == 0
-        _, rate = _decisions(graph.log("drive"))
-        assert rate == pytest.approx(4.0, rel=0.1)
+        _, rate, latency_ms = decisions(graph.log("drive"))
+        assert rate == pytest.approx(4.0, rel=0.1) and latency_ms < 250  # the newest of 30 frames a second
         assert first["end_reason"] == "time_limit" and first["stopped"] is not None
         # driven at 0.5 m/s until the kill's zero twist, standing after it
         assert first["path_length"] == pytest.approx(0.5 * first["stopped"], rel=0.1)
@@ -367,10 +291,9 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
         graph.depthq("sim2", *sim, "--time-limit", "4", "--camera-until", "2")
         graph.wait_for(lambda: "ready" in graph.log("sim2"), 60, "ros sim")
         graph.depthq("drive2", *drive, "--node-name", "depthq_drive2")
-        second = _summary(graph.finish("sim2", 90))
+        second = summary(graph.finish("sim2", 90))
         assert second["end_reason"] == "time_limit" and second["last_frame"] == pytest.approx(2.0, abs=0.04)
         assert 0.3 <= second["stopped"] - second["last_frame"] <= 0.5
         graph.stop("drive2")
         assert "watchdog: zero twist" in graph.log("drive2")
-    finally:
-        graph.close()
+    assert not graph.master_up() and all(p.poll() is not None for p in graph.procs.values())  # nothing left

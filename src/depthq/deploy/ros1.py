@@ -22,7 +22,7 @@ from depthq.errors import ConfigError
 # What `depthq ros` needs, as Debian 12 and Ubuntu name the packages (ROS Noetic's: ros-noetic-ros-base).
 DEBIAN_PACKAGES = (
     "ros-core python3-rospy python3-sensor-msgs python3-geometry-msgs python3-nav-msgs python3-std-msgs "
-    "python3-rosgraph-msgs python3-rosbag"
+    "python3-rosgraph-msgs python3-rosbag python3-rosnode"
 )
 SYSTEM_FOLDERS = ("/opt/ros/noetic/lib/python3/dist-packages", "/usr/lib/python3/dist-packages")
 MODULES = (
