@@ -211,12 +211,15 @@ def test_without_ros_the_verb_is_listed_its_help_works_and_it_exits_2_naming_wha
         "        except SystemExit as e: assert e.code == 0, argv\n"
         "    assert 'ros' in out.getvalue()\n"
         "assert 'rospy' not in sys.modules\n"
+        "assert main(['ros', 'sim', '--camera-hz', '0']) == main(['ros', 'drive', '--policy', 'x', "
+        "'--watchdog', '0']) == 2\n"
         f"sys.exit(main(['ros', 'sim', '--canyon', 'val:1000']) * 10 + main(['ros', 'drive', '--policy', "
         f"'{tmp_path}']))"
     )
     assert done.returncode == 22, done.stderr
-    lines = done.stderr.strip().splitlines()
-    assert len(lines) == 2 and all("apt-get install ros-core python3-rospy" in line for line in lines)
+    bad, missing = done.stderr.strip().splitlines()[:2], done.stderr.strip().splitlines()[2:]
+    assert "--camera-hz" in bad[0] and "--watchdog" in bad[1]  # bad flags first, ROS or not
+    assert len(missing) == 2 and all("apt-get install ros-core python3-rospy" in line for line in missing)
 
 
 @needs_ros

@@ -81,12 +81,13 @@ def _sim(args: argparse.Namespace) -> int:
         raise ConfigError(f"--speed must be ≥ 1 (real time or faster), got {args.speed}")
     if not args.wait > 0:
         raise ConfigError(f"--wait must be > 0 s, got {args.wait}")
-    import_rospy()
-    from depthq.deploy.canyon_robot import RobotSimConfig  # MuJoCo: once ROS is there
-    from depthq.deploy.ros_sim import run_sim_node
+    from depthq.deploy.canyon_robot import RobotSimConfig  # MuJoCo: when this verb runs
 
     config = RobotSimConfig(canyon=args.canyon, camera_hz=args.camera_hz, time_limit_s=args.time_limit,
                             seed=args.seed, camera_until_s=args.camera_until)
+    import_rospy()  # no ROS: the one line naming what to install
+    from depthq.deploy.ros_sim import run_sim_node
+
     s = run_sim_node(config, speed=args.speed, wait_s=args.wait)
     if args.json:
         print(json.dumps(s))
