@@ -138,7 +138,7 @@ def test_the_driver_decides_at_the_policys_rate_on_the_newest_frame_and_stops_wh
     assert len(decisions) in (12, 13) and np.allclose(np.diff(decisions), 0.25, atol=0.021)
     assert driver.stats.rate == pytest.approx(4.0, rel=0.05)
     assert len(stops) == 1 and stops[0][1] == Command(STOP, "watchdog")
-    assert 0.44 <= stops[0][0] - newest <= 0.48 + 1e-9  # out 20 ms before the 0.5 s
+    assert 0.44 - 1e-9 <= stops[0][0] - newest <= 0.46 + 1e-9  # out 40 ms before the 0.5 s at the latest
     driver.on_frame(Frame(4.0, jpegs[0]), 4.6)  # 0.6 s old: stale, never decided on
     assert driver.stats.stale == 1 and driver.tick(4.75) is None
     assert driver.stop() == Command(STOP, "stop")

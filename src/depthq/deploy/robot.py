@@ -21,6 +21,7 @@ from depthq.errors import ConfigError, DataError
 
 LINEAR_SPEED = 0.5  # m/s, the paper's constant forward speed
 RAW_ENCODINGS = ("rgb8", "bgr8", "mono8")  # the `sensor_msgs/Image` encodings a camera driver gives
+WATCHDOG_MARGIN = 3.0  # check periods before the watchdog's deadline at which the zero twist may leave
 
 
 @dataclass(frozen=True)
@@ -137,8 +138,8 @@ class DriverConfig:
             raise ConfigError(f"the decision rate must be > 0 Hz, got {self.decision_hz}")
         if not self.check_hz >= 2 * self.decision_hz:
             raise ConfigError(f"--check-hz must be at least twice the decision rate, got {self.check_hz}")
-        if not self.watchdog_s > 2.0 / self.check_hz:
-            raise ConfigError(f"--watchdog must be > two check periods, got {self.watchdog_s}")
+        if not self.watchdog_s > WATCHDOG_MARGIN / self.check_hz:
+            raise ConfigError(f"--watchdog must be > {WATCHDOG_MARGIN:g} checks long, got {self.watchdog_s}")
         if not self.max_age_s > 0:
             raise ConfigError(f"--max-age must be > 0 s, got {self.max_age_s}")
 
@@ -220,9 +221,10 @@ class RobotDriver:
             if self._shut:
                 return None
             frame = self._newest
-        # Counted from the newest frame's stamp (when it was taken), the zero twist leaves between two
-        # and one check periods before watchdog_s, whatever the tick's phase: it reaches the robot by then.
-        silent = frame is None or now - frame.stamp >= cfg.watchdog_s - 2.0 / cfg.check_hz
+        # Counted from the newest frame's stamp (when it was taken), the zero twist leaves between three
+        # and two check periods before watchdog_s, whatever the tick's phase: it reaches the robot by
+        # then, with time to spare for a late tick and the network.
+        silent = frame is None or now - frame.stamp >= cfg.watchdog_s - WATCHDOG_MARGIN / cfg.check_hz
         due = self._next is None or now >= self._next
         if due:
             self._next = now + cfg.period if self._next is None or now - self._next > cfg.period else (
