@@ -61,11 +61,12 @@ class RobotSimConfig:
 
 @dataclass(frozen=True)
 class Tick:
-    """What one physics step produced: a JPEG frame, a scan (360 readings), whether odometry and clock
-    are due, and the run's end reason once it ended."""
+    """What one physics step produced: a camera frame (`image`, and as JPEG), a scan (360 readings),
+    whether odometry and clock are due, and the run's end reason once it ended."""
 
     time: float
     jpeg: bytes | None = None
+    image: np.ndarray | None = None
     scan: np.ndarray | None = None
     odom: bool = False
     clock: bool = False
@@ -140,11 +141,12 @@ class CanyonRobot:
         self.distance = max(self.distance, float(np.hypot(*(pose[:2] - SPAWN[:2]))))
         canyon = self.world.canyon
         self.progress = max(self.progress, canyon.progress(pose[:2]))
-        jpeg = scan = None
+        jpeg = scan = image = None
         camera_on = self.start is None or self.config.camera_until_s is None or (
             self.driven < self.config.camera_until_s - 1e-9)
         if camera_on and self._due(self.config.camera_hz):
-            jpeg = encode_jpeg(self.world.image(self.rng), self.config.jpeg_quality)
+            image = self.world.image(self.rng)
+            jpeg = encode_jpeg(image, self.config.jpeg_quality)
             self.frames += 1
             self.last_frame = self.driven if self.start is not None else None
         reason = "contact" if contact else None
@@ -164,7 +166,7 @@ class CanyonRobot:
         self.end_reason = reason
         if reason is not None:
             self.command = STOP
-        return Tick(self.time, jpeg, scan, self._due(ODOM_HZ), self._due(CLOCK_HZ), reason)
+        return Tick(self.time, jpeg, image, scan, self._due(ODOM_HZ), self._due(CLOCK_HZ), reason)
 
     @property
     def pose(self) -> np.ndarray:

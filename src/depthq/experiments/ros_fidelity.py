@@ -8,6 +8,13 @@ For each canyon: roscore, `depthq ros sim --canyon C` (the camera at --camera-hz
 canyon: the distance through ROS and in the evaluation, the end reasons, the node's decision rate and
 median latency (frame stamp → command published, on the simulated clock). It drives `eval` canyons
 by design: it measures the deployment, not a choice made on them (docs/robot.md#ros-fidelity).
+
+    python -m depthq.experiments.ros_fidelity CHECKPOINT --replica --seeds 0,1 --out runs/ros-replica
+
+measures where a difference comes from, without ROS and its timing: the same node core
+(`RobotDriver`) and simulated robot (`CanyonRobot`) in lock-step on the simulated clock, the command
+applied `latency` seconds after its decision, the frames given as JPEG (as through ROS) or raw (as
+in the evaluation), with several sensor-noise seeds: one row per (latency, frames) setting.
 """
 
 from __future__ import annotations
@@ -20,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from depthq.configio import write_json
+from depthq.deploy.canyon_robot import CanyonRobot, RobotSimConfig
+from depthq.deploy.robot import DriverConfig, Frame, RobotDriver, robot_policy
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 
@@ -36,14 +45,63 @@ def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float) -> di
     return {**result, "decisions": count, "decision_hz": rate, "latency_ms_median": latency}
 
 
+def replica_run(policy, rate: float, canyon: str, seed: int, latency_s: float, jpeg: bool) -> dict[str, Any]:
+    """One run of the node's core on the simulated robot, lock-step: frames at 30 Hz, the core's checks
+    at 50 Hz, each command applied `latency_s` after it was decided."""
+    robot = CanyonRobot(RobotSimConfig(canyon=canyon, seed=seed))
+    driver = RobotDriver(policy, DriverConfig(decision_hz=rate))
+    every = round(1.0 / (driver.config.check_hz * robot.dt))
+    pending: list[tuple[float, Any]] = []
+    try:
+        while True:
+            tick = robot.tick()
+            if tick.end_reason is not None:
+                return robot.summary(wall_s=1.0)
+            if tick.image is not None:
+                height, width = tick.image.shape[:2]
+                frame = (Frame(tick.time, tick.jpeg) if jpeg else
+                         Frame(tick.time, tick.image.tobytes(), "rgb8", height, width, width * 3))
+                driver.on_frame(frame, tick.time)
+            if robot.steps % every == 0 and (command := driver.tick(tick.time)) is not None:
+                pending.append((tick.time + latency_s, command.twist))
+            while pending and pending[0][0] <= tick.time + 1e-9:
+                robot.receive(pending.pop(0)[1])
+    finally:
+        robot.close()
+
+
+def replica(checkpoint: Path, canyons: tuple[str, ...], seeds: list[int], out: Path) -> dict[str, Any]:
+    """Mean distance per (latency, frames) setting over canyons × seeds, and each run's."""
+    policy, rate, _ = robot_policy(str(checkpoint))
+    settings = [(0.0, False), (0.0, True), (0.06, True)]
+    rows = []
+    for latency, jpeg in settings:
+        runs = [replica_run(policy, rate, c, s, latency, jpeg) for s in seeds for c in canyons]
+        rows.append({"latency_s": latency, "frames": "jpeg" if jpeg else "raw",
+                     "distance_mean": statistics.mean(r["distance"] for r in runs),
+                     "bumps": sum(r["end_reason"] in ("bump", "contact") for r in runs),
+                     "runs": [{k: r[k] for k in ("canyon", "distance", "end_reason")} for r in runs]})
+        row = rows[-1]
+        print(f"latency {1e3 * latency:3.0f} ms, {row['frames']:>4} frames: {row['distance_mean']:.2f} m "
+              f"mean over {len(runs)} runs, {row['bumps']} collisions", flush=True)
+    result = {"checkpoint": str(checkpoint), "seeds": seeds, "canyons": list(canyons), "rows": rows}
+    write_json(out / "replica.json", result)
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("--canyons", default="hard/eval:0-4", help="a canyon set, as evaluate's")
     parser.add_argument("--camera-hz", type=float, default=30.0)
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--replica", action="store_true", help="the ROS-free replica's settings instead")
+    parser.add_argument("--seeds", default="0", help="sensor-noise seeds of the replica, e.g. 0,1")
     args = parser.parse_args(argv)
     canyons = parse_canyon_set(args.canyons)
+    if args.replica:
+        replica(args.checkpoint, canyons, [int(s) for s in args.seeds.split(",")], args.out)
+        return 0
     checkpoint = args.checkpoint.resolve()
     ros = [ros_run(checkpoint, c, args.out / c.replace("/", "_").replace(":", "_"), args.camera_hz)
            for c in canyons]
