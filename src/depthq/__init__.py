@@ -21,7 +21,8 @@ source against it, folders and files):
                                             `depthq bench` figures
     ← experiments                           the measurements behind the docs, run as modules, and the
                                             calibration probe (`depthq probe`)
-    ← scripts ← cli                         one module per verb, the `depthq` command
+    ← scripts ← cli, cli_reference          one module per verb, the `depthq` command, its reference
+                                            page (docs/cli.md)
 
 Names joined by `,` form one unit, whose modules may import each other; units on one line (`|`) do
 not import each other. This root module runs first and imports only `depthq.sim`'s `__init__` (the
