@@ -37,6 +37,7 @@ from depthq.deploy.robot import (
 from depthq.deploy.ros1 import DEBIAN_PACKAGES
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.errors import ConfigError, DataError
+from depthq.experiments.ros_fidelity import replica_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -185,6 +186,18 @@ def test_the_simulated_robot_moves_by_its_last_command_and_senses_on_schedule() 
         assert summary["last_frame"] == pytest.approx(0.97, abs=0.006) and summary["real_time_factor"] == 2.5
     finally:
         robot.close()
+
+
+@pytest.mark.slow
+def test_the_replica_applies_each_command_its_latency_after_the_decision(toy_nets: dict[str, Path]) -> None:
+    """experiments.ros_fidelity's ROS-free replica, at toy size: the node's core and the simulated robot in
+    lock-step; a command decided at t moves the robot from t + latency (its first: the run's start)."""
+    policy, rate, _ = robot_policy(str(toy_nets["depth"]))
+    runs = [replica_run(policy, rate, "val:1000", 0, latency, jpeg=True, time_limit_s=1.0)
+            for latency in (0, 0.1)]
+    for run in runs:
+        assert run["end_reason"] == "time_limit" and run["commands"] in (4, 5) and run["frames"] >= 30
+    assert runs[0]["frames"] + 3 == runs[1]["frames"]  # the start 0.1 s later: three more frames before it
 
 
 # -- ROS 1 installed or not ------------------------------------------------------------------------------

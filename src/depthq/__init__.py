@@ -16,7 +16,8 @@ source against it, folders and files):
     ← train                                 the trainer, its checkpoints, and the offline metric that
                                             re-runs its validation
     ← evaluate | deploy                     online evaluation and the calibration probe (`depthq probe`) |
-                                            ONNX export and the robot step
+                                            ONNX export, the robot's node core, `depthq ros`'s
+                                            ROS 1 nodes and the simulated robot
     ← pipeline                              a sweep's grid, presets, run folder and resumable stages
     ← report | bench                        a sweep folder's tables, figures, findings and HTML report |
                                             `depthq bench` figures

@@ -45,10 +45,13 @@ def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float) -> di
     return {**result, "decisions": count, "decision_hz": rate, "latency_ms_median": latency}
 
 
-def replica_run(policy, rate: float, canyon: str, seed: int, latency_s: float, jpeg: bool) -> dict[str, Any]:
+def replica_run(
+    policy, rate: float, canyon: str, seed: int, latency_s: float, jpeg: bool,
+    time_limit_s: float | None = None,
+) -> dict[str, Any]:
     """One run of the node's core on the simulated robot, lock-step: frames at 30 Hz, the core's checks
     at 50 Hz, each command applied `latency_s` after it was decided."""
-    robot = CanyonRobot(RobotSimConfig(canyon=canyon, seed=seed))
+    robot = CanyonRobot(RobotSimConfig(canyon=canyon, seed=seed, time_limit_s=time_limit_s))
     driver = RobotDriver(policy, DriverConfig(decision_hz=rate))
     every = round(1.0 / (driver.config.check_hz * robot.dt))
     pending: list[tuple[float, Any]] = []
@@ -90,7 +93,8 @@ def replica(checkpoint: Path, canyons: tuple[str, ...], seeds: list[int], out: P
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.ros_fidelity",
+                                     description=__doc__.splitlines()[0])
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("--canyons", default="hard/eval:0-4", help="a canyon set, as evaluate's")
     parser.add_argument("--camera-hz", type=float, default=30.0)
