@@ -33,10 +33,11 @@ from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 
 
-def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float) -> dict[str, Any]:
+def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float, seed: int = 0) -> dict[str, Any]:
     """One run through a real master: the sim's summary with the node's rate and latency."""
     with RosGraph(folder) as graph:
-        graph.depthq("sim", "ros", "sim", "--canyon", canyon, "--camera-hz", str(camera_hz), "--json")
+        graph.depthq("sim", "ros", "sim", "--canyon", canyon, "--camera-hz", str(camera_hz),
+                     "--seed", str(seed), "--json")
         graph.wait_for(lambda: "ready" in graph.log("sim"), 120, "ros sim")
         graph.depthq("drive", "ros", "drive", "--policy", str(checkpoint), "--log-every", "1")
         result = summary(graph.finish("sim", 600))
@@ -100,22 +101,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--camera-hz", type=float, default=30.0)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--replica", action="store_true", help="the ROS-free replica's settings instead")
-    parser.add_argument("--seeds", default="0", help="sensor-noise seeds of the replica, e.g. 0,1")
+    parser.add_argument("--seeds", default="0",
+                        help="sensor-noise seeds, e.g. 0,1,2: one run per canyon and seed on each side")
     args = parser.parse_args(argv)
     canyons = parse_canyon_set(args.canyons)
+    seeds = [int(s) for s in args.seeds.split(",")]
     if args.replica:
-        replica(args.checkpoint, canyons, [int(s) for s in args.seeds.split(",")], args.out)
+        replica(args.checkpoint, canyons, seeds, args.out)
         return 0
     checkpoint = args.checkpoint.resolve()
-    ros = [ros_run(checkpoint, c, args.out / c.replace("/", "_").replace(":", "_"), args.camera_hz)
-           for c in canyons]
-    # what `depthq evaluate CHECKPOINT --canyons … --workers 1` drives: the checkpoint's own rate
-    config = EvalConfig(canyons=canyons)
-    runs = evaluate(str(checkpoint), args.out / "evaluate", config, workers=1, video=False)["runs"]
-    rows = [{"canyon": c, "ros": r["distance"], "evaluate": e["distance"], "ros_end": r["end_reason"],
-             "evaluate_end": e["end_reason"], "decision_hz": r["decision_hz"],
-             "latency_ms_median": r["latency_ms_median"], "real_time_factor": r["real_time_factor"]}
-            for c, r, e in zip(canyons, ros, runs, strict=True)]
+    rows = []
+    for seed in seeds:
+        folder = args.out / f"seed{seed}"
+        ros = [ros_run(checkpoint, c, folder / c.replace("/", "_").replace(":", "_"), args.camera_hz, seed)
+               for c in canyons]
+        # what `depthq evaluate CHECKPOINT --canyons … --seed S --workers 1` drives: the checkpoint's rate
+        config = EvalConfig(canyons=canyons, seed=seed)
+        runs = evaluate(str(checkpoint), folder / "evaluate", config, workers=1, video=False)["runs"]
+        rows += [{"canyon": c, "seed": seed, "ros": r["distance"], "evaluate": e["distance"],
+                  "ros_end": r["end_reason"], "evaluate_end": e["end_reason"],
+                  "decision_hz": r["decision_hz"],
+                  "latency_ms_median": r["latency_ms_median"], "real_time_factor": r["real_time_factor"]}
+                 for c, r, e in zip(canyons, ros, runs, strict=True)]
     total = {"ros": sum(r["ros"] for r in rows), "evaluate": sum(r["evaluate"] for r in rows)}
     result = {"checkpoint": str(args.checkpoint), "camera_hz": args.camera_hz, "rows": rows,
               "ros_distance_mean": total["ros"] / len(rows),
@@ -125,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
               "latency_ms_median": statistics.median(r["latency_ms_median"] for r in rows)}
     write_json(args.out / "ros_fidelity.json", result)
     for r in rows:
-        print(f"{r['canyon']:>14}  ros {r['ros']:6.2f} m ({r['ros_end']:>10})  evaluate "
+        print(f"{r['canyon']:>14} seed {r['seed']}  ros {r['ros']:6.2f} m ({r['ros_end']:>10})  evaluate "
               f"{r['evaluate']:6.2f} m ({r['evaluate_end']:>10})  {r['decision_hz']:.2f} Hz  "
               f"{r['latency_ms_median']:.0f} ms  "
               f"×{r['real_time_factor']} real time")
