@@ -55,9 +55,10 @@ def run_drive_node(
             pub.publish(msg)
         now = rospy.get_time()
         core.published(command, now)
-        if command.stamp is not None:
-            rospy.logdebug("decision %.3f rad/s on the frame of %.3f s, %.0f ms old",
-                           command.twist.angular_z, command.stamp, 1e3 * (now - command.stamp))
+        if command.stamp is not None:  # each decision: at info level in a dry run, where it is all there is
+            log = rospy.loginfo if pub is None else rospy.logdebug
+            log("decision %.3f rad/s on the frame of %.3f s, %.0f ms old", command.twist.angular_z,
+                command.stamp, 1e3 * (now - command.stamp))
         else:
             rospy.loginfo("%s: zero twist%s", command.reason, " (dry run)" if pub is None else "")
 
