@@ -2,10 +2,10 @@
 (`depthq.deploy.ros_sim`) wraps it in a ROS 1 node, as Gazebo was for the original.
 
 One `tick` is one physics step (`WorldConfig.physics_dt`) at the last command received; it says
-which sensors are due (camera at `camera_hz`, LiDAR at `scan_hz`, odometry, clock) and whether the
+which sensors are due (camera at `camera_hz`, LiDAR at 5 Hz, odometry, clock) and whether the
 run ended. A run starts at the first command that moves the robot and ends as the evaluation's do
 (`depthq.sim.env.CanyonEnv`: a contact, a bump, the canyon's end, the family's time limit), the bump
-checked on every LiDAR scan.
+checked as often as the evaluation checks it (`RobotSimConfig.bump_hz`).
 """
 
 from __future__ import annotations
@@ -40,6 +40,9 @@ class RobotSimConfig:
     # Simulated seconds of driving after which the camera stops publishing, as a camera driver that
     # dies (what a node's watchdog is for); none: it never stops.
     camera_until_s: float | None = None
+    # Bump checks per second of driving, each on a scan of that moment; none: as often as an evaluation
+    # checks (`WorldConfig.decision_hz`, 4: once per decision period of the evaluation's robot).
+    bump_hz: float | None = None
 
     def __post_init__(self) -> None:
         parse_canyon(self.canyon)
@@ -47,6 +50,8 @@ class RobotSimConfig:
             raise ConfigError(f"--camera-hz must be in (0, 1000], got {self.camera_hz}")
         if self.time_limit_s is not None and not self.time_limit_s > 0:
             raise ConfigError(f"--time-limit must be > 0 s, got {self.time_limit_s}")
+        if self.bump_hz is not None and not 0 < self.bump_hz <= 200:
+            raise ConfigError(f"bump_hz must be in (0, 200], got {self.bump_hz}")
         if self.camera_until_s is not None and not self.camera_until_s >= 0:
             raise ConfigError(f"--camera-until must be >= 0 s, got {self.camera_until_s}")
         if not 1 <= self.jpeg_quality <= 95:
@@ -94,6 +99,7 @@ class CanyonRobot:
         self.last_frame: float | None = None  # the driving time of the last frame after the start
         self.stopped: float | None = None  # the driving time of the zero command the robot stands by
         self.trajectory = [self.world.pose]
+        self.bump_hz = config.bump_hz or self.world.config.decision_hz
 
     @property
     def time(self) -> float:
@@ -123,6 +129,17 @@ class CanyonRobot:
                 self.stopped = None
         self.command = Twist(speed, yaw)
 
+    def _scan(self) -> np.ndarray:
+        scan = self.world.scan(self.rng)
+        hits = self.world.last_raycast[self.world.last_raycast >= 0]
+        self.closest = min(self.closest, float(hits.min())) if len(hits) else self.closest
+        return scan
+
+    def _due_driving(self, hz: float) -> bool:
+        """True on the physics step where the driving time passes the next multiple of 1/hz."""
+        steps = round(self.driven / self.dt)
+        return math.floor(steps * self.dt * hz + 1e-9) > math.floor((steps - 1) * self.dt * hz + 1e-9)
+
     def _due(self, hz: float) -> bool:
         """True on the physics step where the clock passes the next multiple of 1/hz."""
         now, before = self.steps * self.dt * hz, (self.steps - 1) * self.dt * hz
@@ -151,13 +168,11 @@ class CanyonRobot:
             self.last_frame = self.driven if self.start is not None else None
         reason = "contact" if contact else None
         if self._due(LDS01_HZ):
-            scan = self.world.scan(self.rng)
-            hits = self.world.last_raycast[self.world.last_raycast >= 0]
-            self.closest = min(self.closest, float(hits.min())) if len(hits) else self.closest
+            scan = self._scan()
+        if self.start is not None and self._due_driving(self.bump_hz):
             env = self.env.config
-            if reason is None and self.start is not None and self.driven >= env.bump.grace_s - 1e-9 and bump(
-                scan, env.bump
-            ):
+            reading = scan if scan is not None else self._scan()
+            if reason is None and self.driven >= env.bump.grace_s - 1e-9 and bump(reading, env.bump):
                 reason = "bump"
         if reason is None and self.progress >= canyon.length:
             reason = "end"

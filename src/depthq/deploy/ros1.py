@@ -46,6 +46,15 @@ def import_rospy() -> ModuleType:
     return importlib.import_module("rospy")
 
 
+def require_master() -> None:
+    """A ConfigError naming ROS_MASTER_URI when no master answers there (rospy would wait forever)."""
+    import rosgraph
+
+    if not rosgraph.is_master_online():
+        raise ConfigError(f"no ROS master answers at {rosgraph.get_master_uri()}: start roscore, or set "
+                          "ROS_MASTER_URI to the robot's master")
+
+
 def _import_all() -> str | None:
     """None when every module imports, else the name of the first that does not."""
     for name in MODULES:

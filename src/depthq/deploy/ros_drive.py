@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass
 
 from depthq.deploy.robot import Command, DriverConfig, Frame, RobotDriver, robot_policy
-from depthq.deploy.ros1 import import_rospy
+from depthq.deploy.ros1 import import_rospy, require_master
 
 BUFFER_BYTES = 1 << 24  # rospy's receive buffer: larger than any frame, or it delivers stale ones
 
@@ -36,6 +36,7 @@ def run_drive_node(
     """Drive until shutdown; returns the last statistics line. `driver`: DriverConfig's fields other
     than the rate (the policy's own unless `driver['decision_hz']` is given)."""
     rospy = import_rospy()
+    require_master()
     from geometry_msgs.msg import Twist
     from sensor_msgs.msg import CompressedImage, Image
 

@@ -59,7 +59,7 @@ class RosGraph:
         """Start `argv` as process `name`, stdout and stderr to NAME.log."""
         with open(self.folder / f"{name}.log", "w") as log:
             self.procs[name] = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=self.env,
-                                                cwd=self.folder, start_new_session=True)
+                                                cwd=self.folder, start_new_session=True, preexec_fn=_sigint)
         return self.procs[name]
 
     def depthq(self, name: str, *args: str) -> subprocess.Popen:
@@ -105,6 +105,12 @@ class RosGraph:
             self.stop(name)
         if self.master_up():
             raise RuntimeError(f"a ROS master still answers on port {self.port}")
+
+
+def _sigint() -> None:
+    """In the child: SIGINT stops it, even where this process was started with SIGINT ignored (in the
+    background of a script), which the child would inherit."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def summary(log: str) -> dict[str, Any]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from depthq.deploy.canyon_robot import LDS01_HZ, CanyonRobot, RobotSimConfig
 from depthq.deploy.robot import Twist
-from depthq.deploy.ros1 import import_rospy
+from depthq.deploy.ros1 import import_rospy, require_master
 from depthq.sim.env import COLLISIONS
 
 
@@ -31,6 +31,7 @@ def run_sim_node(config: RobotSimConfig, speed: float = 1.0, wait_s: float = 60.
     """One run at `speed` × real time; `wait_s` wall seconds for a first moving command, else the run
     ends as "no_command". Returns the summary (`CanyonRobot.summary`). SIGINT ends it as "interrupted"."""
     rospy = import_rospy()
+    require_master()
     from geometry_msgs.msg import Twist as TwistMsg
     from nav_msgs.msg import Odometry
     from rosgraph_msgs.msg import Clock

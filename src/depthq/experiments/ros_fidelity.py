@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import statistics
 import sys
 from pathlib import Path
@@ -48,11 +49,11 @@ def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float, seed:
 
 def replica_run(
     policy, rate: float, canyon: str, seed: int, latency_s: float, jpeg: bool,
-    time_limit_s: float | None = None,
+    time_limit_s: float | None = None, bump_hz: float | None = None,
 ) -> dict[str, Any]:
     """One run of the node's core on the simulated robot, lock-step: frames at 30 Hz, the core's checks
     at 50 Hz, each command applied `latency_s` after it was decided."""
-    robot = CanyonRobot(RobotSimConfig(canyon=canyon, seed=seed, time_limit_s=time_limit_s))
+    robot = CanyonRobot(RobotSimConfig(canyon=canyon, seed=seed, time_limit_s=time_limit_s, bump_hz=bump_hz))
     driver = RobotDriver(policy, DriverConfig(decision_hz=rate))
     every = round(1.0 / (driver.config.check_hz * robot.dt))
     pending: list[tuple[float, Any]] = []
@@ -74,14 +75,17 @@ def replica_run(
         robot.close()
 
 
-def replica(checkpoint: Path, canyons: tuple[str, ...], seeds: list[int], out: Path) -> dict[str, Any]:
-    """Mean distance per (latency, frames) setting over canyons × seeds, and each run's."""
+def replica(
+    checkpoint: Path, canyons: tuple[str, ...], seeds: list[int], out: Path,
+    settings: list[tuple[float, bool]], bump_hz: float | None = None,
+) -> dict[str, Any]:
+    """Mean distance per (latency, JPEG frames) setting over canyons × seeds, and each run's."""
     policy, rate, _ = robot_policy(str(checkpoint))
-    settings = [(0.0, False), (0.0, True), (0.06, True)]
     rows = []
     for latency, jpeg in settings:
-        runs = [replica_run(policy, rate, c, s, latency, jpeg) for s in seeds for c in canyons]
-        rows.append({"latency_s": latency, "frames": "jpeg" if jpeg else "raw",
+        runs = [replica_run(policy, rate, c, s, latency, jpeg, bump_hz=bump_hz)
+                for s in seeds for c in canyons]
+        rows.append({"latency_s": latency, "frames": "jpeg" if jpeg else "raw", "bump_hz": bump_hz,
                      "distance_mean": statistics.mean(r["distance"] for r in runs),
                      "bumps": sum(r["end_reason"] in ("bump", "contact") for r in runs),
                      "runs": [{k: r[k] for k in ("canyon", "distance", "end_reason")} for r in runs]})
@@ -89,7 +93,7 @@ def replica(checkpoint: Path, canyons: tuple[str, ...], seeds: list[int], out: P
         print(f"latency {1e3 * latency:3.0f} ms, {row['frames']:>4} frames: {row['distance_mean']:.2f} m "
               f"mean over {len(runs)} runs, {row['bumps']} collisions", flush=True)
     result = {"checkpoint": str(checkpoint), "seeds": seeds, "canyons": list(canyons), "rows": rows}
-    write_json(out / "replica.json", result)
+    write_json(out / f"replica_bump{bump_hz or 'default'}.json", result)
     return result
 
 
@@ -101,13 +105,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--camera-hz", type=float, default=30.0)
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--replica", action="store_true", help="the ROS-free replica's settings instead")
+    parser.add_argument("--settings", default="0:raw,0:jpeg,0.06:jpeg",
+                        help="the replica's LATENCY_S:raw|jpeg settings, comma-separated [%(default)s]")
+    parser.add_argument("--bump-hz", type=float, default=None,
+                        help="the replica's bump checks per second [the evaluation's: the decision rate]")
     parser.add_argument("--seeds", default="0",
                         help="sensor-noise seeds, e.g. 0,1,2: one run per canyon and seed on each side")
     args = parser.parse_args(argv)
+    # Ctrl-C and kill end the runs through RosGraph's cleanup, even in a script's background
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     canyons = parse_canyon_set(args.canyons)
     seeds = [int(s) for s in args.seeds.split(",")]
     if args.replica:
-        replica(args.checkpoint, canyons, seeds, args.out)
+        pairs = (x.split(":") for x in args.settings.split(","))
+        settings = [(float(latency), kind == "jpeg") for latency, kind in pairs]
+        replica(args.checkpoint, canyons, seeds, args.out, settings, args.bump_hz)
         return 0
     checkpoint = args.checkpoint.resolve()
     rows = []
