@@ -48,6 +48,7 @@ from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.errors import ConfigError, DataError
 from depthq.sim.canyon import PAPER
+from depthq.sim.look import upgrade_world
 
 MANIFEST = "manifest.json"
 RUNS = "runs"
@@ -70,6 +71,15 @@ class RunEntry(RunMeta):
 
     def run_meta(self) -> RunMeta:
         return RunMeta(**{name: getattr(self, name) for name in meta_fields()})
+
+
+def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
+    """A manifest's collection config in today's shape: a world recorded before looks (`appearance`)
+    names its look (`depthq.sim.look.upgrade_world`), so an older dataset resumes and compares equal."""
+    env = config.get("env") if isinstance(config, dict) else None
+    if not isinstance(env, dict) or not isinstance(env.get("world"), dict):
+        return config
+    return {**config, "env": {**env, "world": upgrade_world(env["world"])}}
 
 
 def run_path(root: Path, split: str, index: int) -> Path:
@@ -99,7 +109,7 @@ class Dataset:
             if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
                 raise ValueError(f"format {data.get('format')!r} version {data.get('format_version')!r}")
             runs = [from_dict(RunEntry, row) for row in data["runs"]]
-            return cls(root, data["config"], int(data["seed"]), runs)
+            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs)
         except (AttributeError, KeyError, TypeError, ValueError) as err:
             raise DataError(f"{path}: not a valid {FORMAT} manifest ({err})") from err
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, provenance, to_dict, write_json
 from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.errors import ConfigError
@@ -89,6 +89,9 @@ class EvalConfig:
     discount: float = 0.9
     # A lookahead Depth-Q-Net also scores sequences that switch action once.
     switch: bool = False
+    # How the canyons look: flat, colours, textured, heldout or a folder of images (docs/design.md#looks);
+    # none: the family's own. Any policy drives in any look.
+    look: str | None = field(default=None, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:
         families = sorted({CanyonId.parse(c).family for c in self.canyons})
@@ -113,7 +116,9 @@ class EvalConfig:
     def env(self) -> EnvConfig:
         world = WorldConfig() if self.decision_hz is None else WorldConfig(decision_hz=self.decision_hz)
         limit = FAMILIES[self.family].time_limit_s if self.time_limit_s is None else self.time_limit_s
-        return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
+        world = world_for(world, self.family)
+        world = world if self.look is None else replace(world, look=self.look)
+        return EnvConfig(world=world, time_limit_s=limit)
 
 
 def at_policy_rate(config: EvalConfig, policy_spec: str | PolicySpec) -> EvalConfig:
@@ -314,6 +319,7 @@ def evaluate(
     summary = {
         "policy": description,
         "config": to_dict(config),
+        "look": config.env.world.look,
         "provenance": provenance(),
         "host": host_fingerprint(threads=1),  # every worker decides on one torch thread
         "summary": summarize(ordered),

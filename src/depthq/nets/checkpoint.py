@@ -36,9 +36,11 @@ layout before `dataset` and `policy`); a record without `lookahead` (head and tr
 Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
 without `precision` a float32 training; a head without `action_scale` takes the action unscaled (1),
 one without `form` is the paper's ("concat"). Fields renamed within version 3 read under their new
-names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`; the sample settings a train
-record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`, `action_lag`) read
-inside `train.samples`, where TrainConfig holds them now. A newer version is refused by name.
+names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`, the
+dataset's `env.world.appearance` as `env.world.look` ("default": "flat", "randomized": "colours"); the
+sample settings a train record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`,
+`action_lag`) read inside `train.samples`, where TrainConfig holds them now.
+A newer version is refused by name.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ from safetensors.torch import save as save_safetensors
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
 from depthq.control.action_selection import ACTIONS, RULE_OF
 from depthq.data.labels import SampleConfig
-from depthq.data.manifest import Dataset
+from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
@@ -244,6 +246,9 @@ def read_config(folder: Path) -> dict[str, Any]:
         )
     record = _renamed(record)
     record = record if version == FORMAT_VERSION else _upgrade(record)
+    dataset = record.get("dataset")
+    if isinstance(dataset, dict) and isinstance(dataset.get("env"), dict):  # `appearance` → `look`
+        record = {**record, "dataset": {**dataset, "env": upgrade_config(dataset)["env"]}}
     head = record.get("head")
     if isinstance(head, dict):
         record = {**record, "head": {**_ADDED_HEAD, **head}}

@@ -15,6 +15,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sim = sub.add_parser("sim", help="env steps/s, camera + LiDAR at full resolution (target ≥ 120)")
     sim.add_argument("--steps", type=int, default=1000, help="steps per worker")
     sim.add_argument("--workers", type=int, default=1, help="processes, each stepping its own env")
+    sim.add_argument("--family", default="paper", help="the canyon family driven: paper or hard")
+    sim.add_argument("--look", default=None,
+                     help="looks measured one after the other, comma-separated, e.g. colours,textured: "
+                     "names or folders of images (docs/design.md#looks; default: the family's own)")
     col = sub.add_parser(
         "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
     )
@@ -83,12 +87,17 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--steps", args.steps)
         _positive("--workers", args.workers)
         from depthq.bench.sim import bench_sim  # mujoco: off the CLI's startup
+        from depthq.sim.world import WorldConfig
 
-        r = bench_sim(args.steps, args.workers)
-        return (
-            r,
-            f"{r['steps_per_s']} env steps/s with {r['workers']} worker(s), max RSS {r['max_rss_mb']} MB",
-        )
+        looks = (None,) if args.look is None else tuple(look.strip() for look in args.look.split(","))
+        for look in looks:  # a bad family or look fails here, before any worker starts
+            WorldConfig(family=args.family, **({} if look is None else {"look": look}))
+        r = bench_sim(args.steps, args.workers, args.family, looks)
+        each = r["looks"] if "looks" in r else {r["look"]: r}
+        figure = "; ".join(f"{look}: {e['steps_per_s']} env steps/s" + (
+            f" (×{r['relative'][look]})" if "relative" in r else "") for look, e in each.items())
+        last = next(iter(each.values()))
+        return r, f"{figure} with {last['workers']} worker(s), max RSS {last['max_rss_mb']} MB"
     if args.what == "collect":
         _positive("--runs", args.runs)
         _positive("--workers", args.workers)
