@@ -112,10 +112,11 @@ def test_camera_model_is_off_in_flat_and_blurs_with_the_yaw_rate():
     try:
         env.reset(seed=1, options={"canyon": "hard/val:1000"})
         camera = env.world.robot_camera
-        assert camera is not None and 1 <= camera.quality <= 100
+        assert camera is not None and camera.quality is None  # the recorder's JPEG is the camera's
         assert camera.blur_px(0.0) == 0 and camera.blur_px(1.0) > camera.blur_px(0.5) > 0
         frame = env.world.render().copy()
-        still, turning = camera.expose(frame, 0.0), camera.expose(frame, 20.0)
+        still = camera.expose(frame, 0.0).copy()
+        turning = camera.expose(frame, 20.0)
         # a horizontal blur: neighbouring columns grow alike, rows barely change
         assert np.abs(np.diff(turning, axis=1)).mean() < 0.7 * np.abs(np.diff(still, axis=1)).mean()
     finally:

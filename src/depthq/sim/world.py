@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from statistics import NormalDist
 
 import mujoco
 import numpy as np
@@ -13,7 +12,7 @@ import numpy as np
 from depthq.configio import OMIT_DEFAULT
 from depthq.errors import ConfigError
 from depthq.sim.camera import OffscreenCamera
-from depthq.sim.camera_model import ImagingConfig, RobotCamera
+from depthq.sim.camera_model import ImagingConfig, RobotCamera, noise_table
 from depthq.sim.canyon import FAMILIES, PAPER, Canyon, CanyonConfig
 from depthq.sim.look import FLAT, SURFACES, CanyonLook, check_look, draw_canyon_look, is_textured
 from depthq.sim.mjcf import (
@@ -114,18 +113,6 @@ def _upright(yaw: float) -> np.ndarray:
     return out
 
 
-def _noise_table(std_levels: float) -> np.ndarray:
-    """Gaussian pixel noise quantised to grey levels, as a lookup from one random byte.
-
-    Indexing this 256-entry table with uniform random bytes draws from N(0, std²) at the resolution
-    of 1/256 in probability — exact enough for σ ≈ 1.8 levels and ~10× cheaper than normal floats.
-    """
-    if std_levels == 0:
-        return np.zeros(256, np.int16)
-    dist = NormalDist(0.0, std_levels)
-    return np.array([round(dist.inv_cdf((k + 0.5) / 256)) for k in range(256)], np.int16)
-
-
 class CanyonWorld:
     """MuJoCo world: `load` a canyon, `place` the robot, `advance`, sense (camera, LiDAR).
 
@@ -159,7 +146,7 @@ class CanyonWorld:
         self.last_raycast = np.full(config.lidar.n_rays, -1.0)  # the noise-free distances of the last scan
         self._geomgroup = np.zeros(6, np.uint8)
         self._geomgroup[WALL_GROUP] = 1
-        self._noise = _noise_table(255.0 * config.camera.noise_std)
+        self._noise = noise_table(255.0 * config.camera.noise_std)
         cam = config.camera
         # The robot's own body is hidden from its camera, as on the real robot (camera above the chassis);
         # in a textured look so are the walls and pillars, whose textured copies it sees instead.
@@ -329,8 +316,7 @@ class CanyonWorld:
             self.robot_camera = None
             return
         own = np.random.default_rng(rng.integers(2**63))
-        self.robot_camera = RobotCamera(imaging, cam.width, cam.height, cam.hfov_deg, own)
-        self._run_noise = _noise_table(255.0 * cam.noise_std * self.robot_camera.noise_scale)
+        self.robot_camera = RobotCamera(imaging, cam.width, cam.height, cam.hfov_deg, cam.noise_std, own)
 
     def image(self, rng: np.random.Generator) -> np.ndarray:
         """The camera frame: the render with Gaussian pixel noise (σ = camera.noise_std of full scale),
@@ -339,9 +325,7 @@ class CanyonWorld:
         if self.robot_camera is None:
             noise = self._noise[rng.integers(0, 256, size=frame.shape, dtype=np.uint8)]
             return np.clip(frame.astype(np.int16) + noise, 0, 255).astype(np.uint8)
-        exposed = self.robot_camera.expose(frame, float(self.data.qvel[2]))
-        noise = self._run_noise[rng.integers(0, 256, size=frame.shape, dtype=np.uint8)]
-        return self.robot_camera.finish(np.clip(exposed + noise, 0, 255).astype(np.uint8))
+        return self.robot_camera.take(frame, float(self.data.qvel[2]), rng)
 
     def close(self) -> None:
         if self._eye is not None:
