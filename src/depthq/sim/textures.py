@@ -182,10 +182,18 @@ def folder_bank(folder: str | Path) -> TextureBank:
     return TextureBank(f"folder:{path.resolve()}", photos=tuple(images), folder=str(path.resolve()))
 
 
-@functools.lru_cache(maxsize=64)
 def photo(name: str, folder: str | None = None, size: int = TEXTURE_SIZE) -> np.ndarray:
     """A photograph as float32 (size, size, 3) in [0, 1]: its centre square, resized. Without `folder`,
     a file inside scikit-image's installed data module (read as a file: never a download)."""
+    square = _square(name, folder)
+    if size != TEXTURE_SIZE:
+        square = square.resize((size, size), Image.Resampling.BILINEAR)
+    return np.asarray(square, np.float32) / 255.0
+
+
+@functools.lru_cache(maxsize=256)
+def _square(name: str, folder: str | None) -> Image.Image:
+    """A photograph's centre square at TEXTURE_SIZE, decoded once per process."""
     if folder is None:
         try:
             path = resources.files("skimage") / "data" / name
@@ -203,8 +211,7 @@ def photo(name: str, folder: str | None = None, size: int = TEXTURE_SIZE) -> np.
     w, h = rgb.size
     side = min(w, h)
     box = ((w - side) // 2, (h - side) // 2, (w - side) // 2 + side, (h - side) // 2 + side)
-    square = rgb.crop(box).resize((size, size), Image.Resampling.LANCZOS)
-    return np.asarray(square, np.float32) / 255.0
+    return rgb.crop(box).resize((TEXTURE_SIZE, TEXTURE_SIZE), Image.Resampling.LANCZOS)
 
 
 def draw_texture(bank: TextureBank, rng: np.random.Generator, size: int = TEXTURE_SIZE) -> np.ndarray:
