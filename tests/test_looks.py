@@ -1,6 +1,8 @@
 """Looks apart from geometry and the robot camera model, rendered by real MuJoCo at small sizes."""
 
 import hashlib
+import json
+import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from depthq.data.manifest import upgrade_config
+from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError
 from depthq.sim.camera_model import ImagingConfig
 from depthq.sim.env import CanyonEnv, EnvConfig
@@ -123,10 +125,22 @@ def test_camera_model_is_off_in_flat_and_blurs_with_the_yaw_rate():
         env.close()
 
 
-def test_records_written_before_looks_read_appearance_as_look():
+def test_records_written_before_looks_read_appearance_as_look(small_dataset, tmp_path):
     assert upgrade_world({"appearance": "randomized", "speed": 0.5}) == {"look": "colours", "speed": 0.5}
     config = {"env": {"world": {"appearance": "default"}}, "runs": 3}
     assert upgrade_config(config) == {"env": {"world": {"look": "flat"}}, "runs": 3}
+    old = tmp_path / "data"  # a dataset whose manifest was written before looks: appearance, no look
+    shutil.copytree(small_dataset, old, ignore=shutil.ignore_patterns("features"))
+    manifest = json.loads((old / "manifest.json").read_text())
+    world = manifest["config"]["env"]["world"]
+    assert world.pop("look") == "flat"
+    world["appearance"] = "default"
+    (old / "manifest.json").write_text(json.dumps(manifest))
+    dataset = Dataset.open(old)
+    upgraded = dataset.config["env"]["world"]
+    assert upgraded["look"] == "flat" and "appearance" not in upgraded
+    resumed = Dataset.create(old, Dataset.open(small_dataset).config, dataset.seed)  # the same collection
+    assert resumed.fingerprint() == Dataset.open(small_dataset).fingerprint()
 
 
 def test_a_bad_look_is_exit_status_2_naming_it(tmp_path):
