@@ -65,6 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     step.add_argument("--canyon", default="val:1000", help="the canyon driven (its family's world)")
     step.add_argument("--steps", type=int, default=50, help="steps timed, part by part")
     step.add_argument("--threads", type=int, default=1, help="torch threads (an evaluation worker has 1)")
+    for parser in (col, ev, step):
+        parser.add_argument("--look", default=None,
+                            help="the look driven in: flat, colours, textured, heldout or a folder of images "
+                            "(docs/design.md#looks; default: the canyons' family's own)")
     for parser in (sim, col, feat, tr, pol, ev, step):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
     for parser in (feat, tr, pol, ev, step):
@@ -74,6 +78,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _positive(name: str, value: float) -> None:
     if not value > 0:
         raise ConfigError(f"{name} must be > 0, got {value}")
+
+
+def _check_look(look: str | None) -> None:
+    """A bad --look fails here, before any work."""
+    if look is not None:
+        from depthq.sim.look import check_look  # mujoco's package: off the CLI's startup
+
+        check_look(look)
 
 
 def _precisions(text: str) -> tuple[str, ...]:
@@ -103,7 +115,8 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--workers", args.workers)
         from depthq.bench.collect import bench_collect  # mujoco: off the CLI's startup
 
-        r = bench_collect(args.runs, tuple(sorted({1, args.workers})))
+        _check_look(args.look)
+        r = bench_collect(args.runs, tuple(sorted({1, args.workers})), args.look)
         last = r[f"w{args.workers}"]
         return r, (
             f"{r['w1']['steps_per_s']} steps/s with 1 worker, {last['steps_per_s']} with {args.workers} "
@@ -137,7 +150,8 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         from depthq.evaluate.online import parse_canyon_set
 
         canyons = parse_canyon_set(args.canyons)
-        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device)
+        _check_look(args.look)
+        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device, args.look)
         return r, (
             f"{r['policy']} in {r['canyons']} canyons ({r['decisions']} decisions), {r['workers']} "
             f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
@@ -148,7 +162,8 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--threads", args.threads)
         from depthq.bench.step import bench_step  # torch, mujoco: off the CLI's startup
 
-        r = bench_step(args.policy, args.canyon, args.steps, args.device, args.threads)
+        _check_look(args.look)
+        r = bench_step(args.policy, args.canyon, args.steps, args.device, args.threads, args.look)
         parts = ", ".join(f"{k} {v}" for k, v in {**r["sim_ms"], **r["policy_ms"]}.items())
         return r, (
             f"ms: {parts}; floor {r['floor_ms_per_step']} ms per lock-step step; a batch of {r['batch']} "
