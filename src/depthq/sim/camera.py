@@ -44,11 +44,13 @@ class OffscreenCamera:
         mujoco.mjr_readPixels(self._buffer, None, self._rect, self._context)
         return self._buffer[::-1]
 
-    def upload_textures(self, model: mujoco.MjModel, ids: list[int]) -> None:
-        """Give the renderer the pixels of `model`'s textures `ids` (written after it was made)."""
+    def upload(self, model: mujoco.MjModel, textures: list[int], meshes: list[int]) -> None:
+        """Give the renderer `model`'s textures and meshes of these ids (changed after it was made)."""
         self._gl.make_current()
-        for tex in ids:
+        for tex in textures:
             mujoco.mjr_uploadTexture(model, self._context, tex)
+        for mesh in meshes:
+            mujoco.mjr_uploadMesh(model, self._context, mesh)
 
     def close(self) -> None:
         if self._gl is not None:

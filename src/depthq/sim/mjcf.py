@@ -100,7 +100,7 @@ def build_mjcf(
              width="8" height="8"/>"""
     if textured:
         assets, sky, ground = textured_assets(canyon.obstacles.radius, canyon.obstacles.height)
-        walls += textured_geoms(n_walls, canyon.obstacles.count)
+        walls += textured_geoms(canyon.obstacles.count)
     hl, hw, h = robot.length / 2, robot.width / 2, robot.body_height
     sx, r = robot.sensor_offset_x, robot.wheel_radius
     return f"""
@@ -142,13 +142,6 @@ def build_mjcf(
 """
 
 
-def side(k: int, n_walls: int) -> str:
-    """The surface wall piece `k` belongs to: its side (left pieces first, then right), or the back wall."""
-    if k == n_walls - 1:
-        return "back"
-    return "left" if k < (n_walls - 1) // 2 else "right"
-
-
 def textured_assets(radius: float, height: float) -> tuple[str, str, str]:
     """A texture and material per surface (world-scaled: one repeat per `TEXTURE_METRES` m), a gradient
     sky, the pillars' mesh; and the ground's material attribute. `CanyonWorld.load` writes the
@@ -162,7 +155,10 @@ def textured_assets(radius: float, height: float) -> tuple[str, str, str]:
     )
     sky = """<texture name="sky" type="skybox" builtin="gradient" rgb1="0.5 0.6 0.8" rgb2="0.8 0.8 0.8"
              width="64" height="64"/>"""
-    return assets + "\n    " + pillar_mesh(radius, height), sky, 'material="mat_floor"'
+    # Placeholders (a tetrahedron, so that the model compiles) until `CanyonWorld.load` writes a canyon.
+    walls = "".join(f'\n    <mesh name="wall_{s}" vertex="0 0 0 1 0 0 0 1 0 0 0 1" inertia="shell"/>'
+                    for s in WALL_SIDES)
+    return assets + "\n    " + pillar_mesh(radius, height) + walls, sky, 'material="mat_floor"'
 
 
 def pillar_mesh(radius: float, height: float, sides: int = 32) -> str:
@@ -188,18 +184,48 @@ def pillar_mesh(radius: float, height: float, sides: int = 32) -> str:
             f'face="{" ".join(str(i) for f in faces for i in f)}"/>')
 
 
-def textured_geoms(n_walls: int, n_pillars: int) -> str:
-    """The walls' and pillars' visual copies (VISUAL_GROUP, no contacts), parked like the walls.
-    A wall's copy is its box turned so that its big faces are the box's local xy-plane, which is the
-    plane MuJoCo maps a 2D texture onto without streaks."""
+WALL_SIDES = ("left", "right", "back")  # the walls' textured surfaces, one mesh each
+
+
+def textured_geoms(n_pillars: int) -> str:
+    """The walls' and pillars' visual copies (VISUAL_GROUP, no contacts): a mesh per wall side, which
+    `CanyonWorld.load` writes per canyon (`wall_ribbon`), and a pillar mesh per pillar, parked."""
     walls = "".join(
-        f'\n    <geom name="wallv{i}" type="box" size="0.1 {WALL_HEIGHT / 2} {WALL_THICKNESS / 2}" '
-        f'pos="0 {-10 - i} {WALL_HEIGHT / 2}" material="mat_{side(i, n_walls)}" group="{VISUAL_GROUP}" '
+        f'\n    <geom name="wall_{s}" type="mesh" mesh="wall_{s}" material="mat_{s}" group="{VISUAL_GROUP}" '
         f'contype="0" conaffinity="0"/>'
-        for i in range(n_walls)
+        for s in WALL_SIDES
     )
     return walls + "".join(
-        f'\n    <geom name="obstaclev{i}" type="mesh" mesh="pillar" pos="0 {-10 - n_walls - i} 0" '
+        f'\n    <geom name="obstaclev{i}" type="mesh" mesh="pillar" pos="0 {-10 - i} 0" '
         f'material="mat_pillars" group="{VISUAL_GROUP}" contype="0" conaffinity="0"/>'
         for i in range(n_pillars)
     )
+
+
+def wall_ribbon(line: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A wall along the polyline `line` (n, 2) as a mesh: both faces of each piece, WALL_THICKNESS
+    apart as its collision box's are, mitred where pieces meet (no gap), WALL_HEIGHT high, with texture
+    coordinates in metres (arc length along the wall, height): the texture runs on unbroken from piece
+    to piece. Each piece has its own vertices, so it is shaded flat. Returns vertices, texture
+    coordinates and triangles."""
+    d = np.diff(line, axis=0)
+    length = np.linalg.norm(d, axis=1)
+    normal = np.stack([-d[:, 1], d[:, 0]], axis=1) / length[:, None]
+    # at each point the mitre: the mean of its pieces' normals, as long as keeps both faces t/2 off
+    around = np.concatenate([normal[:1], normal]) + np.concatenate([normal, normal[-1:]])
+    around /= np.linalg.norm(around, axis=1, keepdims=True)
+    cos = np.einsum("ij,ij->i", around, np.concatenate([normal, normal[-1:]]))
+    offset = around * (WALL_THICKNESS / 2 / np.maximum(cos, 0.2))[:, None]
+    arc = np.concatenate([[0.0], np.cumsum(length)])
+    vertices, uv, faces = [], [], []
+    for sign in (1.0, -1.0):  # the two faces, each with its own vertices (and so its own normals)
+        for k in range(len(d)):
+            base = len(vertices)
+            for i in (k, k + 1):
+                for z in (0.0, WALL_HEIGHT):
+                    vertices.append((*(line[i] + sign * offset[i]), z))
+                    uv.append((arc[i], z))
+            # base: k low, k high, k+1 low, k+1 high; counter-clockwise seen from the face's side
+            quad = [(base, base + 2, base + 3), (base, base + 3, base + 1)]
+            faces += quad if sign < 0 else [t[::-1] for t in quad]
+    return np.array(vertices), np.array(uv), np.array(faces)

@@ -20,10 +20,12 @@ from depthq.sim.mjcf import (
     VISUAL_GROUP,
     WALL_GROUP,
     WALL_HEIGHT,
+    WALL_SIDES,
     WALL_THICKNESS,
     CameraConfig,
     RobotConfig,
     build_mjcf,
+    wall_ribbon,
 )
 from depthq.sim.sensors import LidarConfig, finish_scan, ray_directions
 
@@ -103,13 +105,7 @@ def world_for(world: WorldConfig, family: str) -> WorldConfig:
 
 
 _TEXTURES = tuple(f"tex_{s}" for s in SURFACES)
-
-
-def _upright(yaw: np.ndarray) -> np.ndarray:
-    """The quaternions (n, 4) that turn a box's local y axis up and its x axis to headings `yaw` (n,):
-    a turn by `yaw` about z after a quarter turn about x."""
-    c, s, h = np.cos(yaw / 2), np.sin(yaw / 2), math.sqrt(0.5)
-    return np.stack([c * h, c * h, s * h, s * h], axis=1)
+_SHELL = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL  # a wall's mesh: its inertia from its surface
 
 
 class CanyonWorld:
@@ -132,7 +128,6 @@ class CanyonWorld:
         self._default_pillar_rgba = np.array(self._obstacles[0].rgba) if self._obstacles else None
         self._default_sun_dir = np.array(self._spec.light("sun").dir)
         if config.textured:
-            self._visual_walls = [self._spec.geom(f"wallv{i}") for i in range(self._n_walls)]
             self._visual_pillars = [self._spec.geom(f"obstaclev{i}") for i in range(len(self._obstacles))]
         self.model = self._spec.compile()
         self.data = mujoco.MjData(self.model)
@@ -175,17 +170,20 @@ class CanyonWorld:
             rgba, pillar_rgba = self._lit(look)
         else:
             rgba, pillar_rgba = self._appearance(appearance_rng)
-        upright = _upright(yaw) if textured else None
         for k, geom in enumerate(self._walls):
             geom.pos = (mid[k, 0], mid[k, 1], WALL_HEIGHT / 2)
             geom.quat = (math.cos(yaw[k] / 2), 0.0, 0.0, math.sin(yaw[k] / 2))
             geom.size = (half[k], WALL_THICKNESS / 2, WALL_HEIGHT / 2)
             geom.rgba = rgba[k]
-            if textured:  # its visual copy, turned so that the big faces are its local xy-plane
-                copy = self._visual_walls[k]
-                copy.pos = geom.pos
-                copy.quat = upright[k]
-                copy.size = (half[k], WALL_HEIGHT / 2, WALL_THICKNESS / 2)
+        if textured:  # each side's visual copy: one mesh along the whole wall
+            for side, line in zip(WALL_SIDES, (canyon.left, canyon.right, canyon.back), strict=True):
+                vertices, uv, faces = wall_ribbon(line)
+                # A new mesh each time: MuJoCo 4.0 crashes recompiling a mesh whose vertices were replaced.
+                self._spec.delete(self._spec.mesh(f"wall_{side}"))
+                mesh = self._spec.add_mesh(name=f"wall_{side}", inertia=_SHELL)
+                mesh.uservert = vertices.reshape(-1).tolist()
+                mesh.usertexcoord = uv.reshape(-1).tolist()
+                mesh.userface = faces.reshape(-1).tolist()
         if len(canyon.obstacles) > len(self._obstacles):
             raise ConfigError(
                 f"canyon has {len(canyon.obstacles)} pillars, the world was built for {len(self._obstacles)}"
@@ -211,8 +209,8 @@ class CanyonWorld:
         return np.tile(self._default_wall_rgba, (self._n_walls, 1)), self._default_pillar_rgba
 
     def _paint(self, look: CanyonLook) -> None:
-        """Write a textured look's pixels into the compiled model and upload them, with the sky, to the
-        renderer (its context was made from the first model); set the ambient light."""
+        """Write a textured look's pixels into the compiled model and upload them, with the sky and the
+        walls' meshes, to the renderer (its context was made from the first model); set the ambient light."""
         m = self.model
         m.vis.headlight.ambient[:] = look.ambient
         m.vis.headlight.diffuse[:] = 0.1
@@ -222,7 +220,8 @@ class CanyonWorld:
             adr = m.tex_adr[tex]
             m.tex_data[adr : adr + pixels.size] = pixels.reshape(-1)
         if self._eye is not None:
-            self._eye.upload_textures(m, ids)
+            meshes = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_MESH, f"wall_{side}") for side in WALL_SIDES]
+            self._eye.upload(m, ids, meshes)
 
     def _appearance(self, rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
         """Wall colours (and, randomised, ground colour and sun direction) for the next canyon."""
