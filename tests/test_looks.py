@@ -3,14 +3,13 @@
 import hashlib
 import json
 import shutil
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
 import pytest
 from PIL import Image
 
+from depthq.cli import main
 from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError
 from depthq.sim.camera_model import ImagingConfig
@@ -143,10 +142,9 @@ def test_records_written_before_looks_read_appearance_as_look(small_dataset, tmp
     assert resumed.fingerprint() == Dataset.open(small_dataset).fingerprint()
 
 
-def test_a_bad_look_is_exit_status_2_naming_it(tmp_path):
-    result = subprocess.run(
-        [sys.executable, "-m", "depthq.cli", "drive", "--look", "neon", "--out", str(tmp_path / "o")],
-        capture_output=True, text=True, timeout=120,
-    )
-    assert result.returncode == 2 and "neon" in result.stderr
+def test_a_bad_look_is_exit_status_2_naming_it(tmp_path, capsys):
+    for argv in (["drive", "--look", "neon"], ["bench", "sim", "--look", "colours,neon", "--steps", "1"],
+                 ["collect", "--look", "neon", "--runs", "1"], ["evaluate", "heuristic", "--look", "neon"]):
+        assert main([*argv, "--out", str(tmp_path / "o")] if argv[0] != "bench" else argv) == 2, argv
+        assert "neon" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
