@@ -239,8 +239,8 @@ class ImportConfig:
     jpeg_quality: int = JPEG_QUALITY
 
     def __post_init__(self) -> None:
-        if not self.max_gap_s > 0:
-            raise ConfigError(f"--max-gap must be > 0 s, got {self.max_gap_s}")
+        if not 0 < self.max_gap_s < math.inf:
+            raise ConfigError(f"--max-gap must be a number of seconds > 0, got {self.max_gap_s}")
         if self.val_runs < 0:
             raise ConfigError(f"--val-runs must be >= 0, got {self.val_runs}")
         for name in ("image", "scan", "cmd"):
@@ -289,12 +289,17 @@ def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), prog
         if not cuts:
             scan = f", with a scan within {config.max_gap_s / 2:g} s" if "scan" in conns else ""
             raise ConfigError(f"{bag}: no run found (no frame while the robot drove{scan}); nothing written")
+        if config.val_runs > len(cuts) - 1:
+            raise ConfigError(f"--val-runs {config.val_runs}: {bag} holds {len(cuts)} run(s), and at least "
+                              f"one must train: give at most {len(cuts) - 1}; nothing written")
         out.parent.mkdir(parents=True, exist_ok=True)
+        for stale in out.parent.glob(f".{out.name}.*.tmp"):  # a killed import's (its --out is locked)
+            shutil.rmtree(stale, ignore_errors=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
         try:
             record = {"source": rec.source, "bag": bag.name, **to_dict(config)}
             dataset = Dataset.create(staging, record, seed=0)
-            n_val = min(config.val_runs, len(cuts) - 1)
+            n_val = config.val_runs
             bar = tqdm(total=len(cuts), desc="bag import", unit="run", disable=not progress)
             for position, (first, last, images) in enumerate(_runs_with_images(rec, conns, cuts)):
                 is_val = position >= len(cuts) - n_val

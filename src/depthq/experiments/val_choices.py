@@ -19,6 +19,7 @@ from typing import Any
 
 from depthq.configio import read_json
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.checkpoint import read_sidecar
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 
@@ -92,7 +93,7 @@ def run_variant(
         config = eval_config or EvalConfig(canyons=parse_canyon_set(CANYONS))
         result = evaluate(str(ckpt), ev, config, progress=False, video=False)
     s = result["summary"]
-    best, last = read_json(ckpt / "best.json"), read_json(ckpt / "last.json")
+    best, last = read_sidecar(ckpt, "best"), read_sidecar(ckpt, "last")
     print(f"{name}: best epoch {best['epoch']} of {last['epoch']}, {last['seconds']:.1f} s/epoch", flush=True)
     return {
         "variant": name,

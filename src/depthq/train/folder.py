@@ -13,7 +13,8 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
                              fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
                              the epochs averaged, their count, the mean's validation loss)
-    metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
+    metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch;
+                             the seconds, a timing, are a log: no other file holds one)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
                              ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
                              ("rng.torch"), the weight average so far ("average.*"), and in its
@@ -57,6 +58,7 @@ from depthq.nets.checkpoint import (
     stored_parts,
     weights_bytes,
     write_record,
+    write_sidecar,
 )
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.trunk import build_trunk
@@ -181,11 +183,13 @@ def save_epoch(
     snapshot: bool = False,
     average: AveragedModel | None = None,
     average_loss: tuple[float, float] | None = None,
+    seconds: float | None = None,
 ) -> None:
     """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
     also as epoch_NNNN.safetensors; `average`, once it holds an epoch, one per epoch up to this one:
     also average.safetensors, and its validation loss and spread `average_loss` in average.json),
-    metrics and logs."""
+    and metrics.csv, the log of every epoch's metrics and its `seconds` (the one timing written: the
+    other files hold none, so a resumed training writes them byte for byte as an uninterrupted one)."""
     weights = trainable_state(model)
     averaged = int(average.n_averaged) if average is not None else 0
     average_from = state.epoch - averaged + 1  # the average holds every epoch since its first
@@ -211,16 +215,27 @@ def save_epoch(
     also = (["best"] if is_best else []) + ([snapshot_stem(state.epoch)] if snapshot else [])
     for stem in ("last", *also):
         atomic_write_bytes(out / f"{stem}.safetensors", blob)
-        write_json(out / f"{stem}.json", state.history[-1])
+        write_sidecar(out, stem, state.history[-1])
     if averaged:
         atomic_write_bytes(out / "average.safetensors", weights_bytes(mean, {"epoch": str(state.epoch)}))
         val = dict(zip(("val_loss", "val_loss_std"), average_loss, strict=True)) if average_loss else {}
-        write_json(out / "average.json", {"epochs": [average_from, state.epoch], "count": averaged, **val})
+        write_sidecar(out, "average", {"epochs": [average_from, state.epoch], "count": averaged, **val})
+    logged = _logged_seconds(out / METRICS)
+    logged[state.epoch] = "" if seconds is None else str(seconds)
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(state.history)
+    writer.writerows({**row, "seconds": logged.get(int(row["epoch"]), "")} for row in state.history)
     atomic_write_bytes(out / METRICS, text.getvalue().encode())
+
+
+def _logged_seconds(path: Path) -> dict[int, str]:
+    """epoch → its seconds, as metrics.csv logged them ({} without one)."""
+    try:
+        with path.open(newline="") as f:
+            return {int(row["epoch"]): row.get("seconds") or "" for row in csv.DictReader(f)}
+    except (FileNotFoundError, KeyError, ValueError, TypeError):
+        return {}
 
 
 def saved_epoch(out: Path) -> int:

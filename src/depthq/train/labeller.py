@@ -35,7 +35,15 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
+from depthq.configio import (
+    atomic_write_bytes,
+    check_seed,
+    from_dict,
+    provenance,
+    read_json,
+    to_dict,
+    write_json,
+)
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
@@ -127,6 +135,7 @@ class LabellerConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
         if self.method not in METHODS:
