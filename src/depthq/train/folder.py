@@ -1,6 +1,7 @@
 """A training output folder: what was trained, its weights, its metrics, and how to resume it.
 
-Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename):
+Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename;
+a killed training's temporaries are removed when it resumes):
 
     config.json              what was trained, on which data, for which policy (`depthq.nets.checkpoint`,
                              which owns the format: this file and the weight files, version, digests)
@@ -152,6 +153,13 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
             f"{done}) and did not keep them; use another folder"
         )
     return True
+
+
+def remove_temporaries(out: Path) -> None:
+    """Remove the temporary files (`.NAME.*.tmp`) a killed training left half-written in `out`; its
+    one writer is this process (`depthq.lock` holds the folder for `depthq train`)."""
+    for tmp in out.glob(".*.tmp"):
+        tmp.unlink(missing_ok=True)
 
 
 def record_training(

@@ -61,6 +61,7 @@ def train(
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
+    folder.remove_temporaries(out)
     torch.set_num_threads(threads or cores())
     folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
