@@ -146,7 +146,7 @@ def test_an_edited_checkpoint_config_or_sidecar_is_refused(toy_nets: dict[str, P
 
 
 def test_an_edited_manifest_row_is_refused_where_training_reads_it(
-    small_dataset: Path, tmp_path: Path
+    small_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     for edit in ("n_frames", "swap"):
         root = tmp_path / edit
@@ -160,14 +160,18 @@ def test_an_edited_manifest_row_is_refused_where_training_reads_it(
         write_json(root / MANIFEST, manifest)
         dataset = Dataset.open(root)
         assert dataset.verify()
-        with pytest.raises(DataError, match=f"differs from its row in .*{MANIFEST} in .*index|n_frames"):
+        with pytest.raises(DataError, match=f"differs from its row in .*{MANIFEST} in .*(index|n_frames)"):
             for entry in dataset.entries():
                 dataset.read_run(entry, images=False)
+        ckpt = tmp_path / f"ckpt_{edit}"
+        args = ["train", "--model", "depth", "--data", str(root), "--out", str(ckpt), "--no-progress"]
+        assert main(args) == 1
+        assert "differs from its row" in _one_line(capsys) and not ckpt.exists()
 
 
 @pytest.mark.slow
 def test_a_killed_feature_computation_is_cleaned_up_and_a_flipped_cache_byte_is_refused(
-    small_dataset: Path, tmp_path: Path
+    small_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     root = shutil.copytree(small_dataset, tmp_path / "data", ignore=shutil.ignore_patterns("features"))
     folder = cache_dir(root, DEFAULT_TRUNK, 128)
@@ -190,6 +194,11 @@ def test_a_killed_feature_computation_is_cleaned_up_and_a_flipped_cache_byte_is_
         f.write(bytes([byte[0] ^ 0x7C]))
     with pytest.raises(DataError, match=f"{ARRAY}: corrupted feature cache .* delete"):
         load_features(Dataset.open(root), DEFAULT_TRUNK, 128, progress=False)
+    assert main(["dataset", "verify", str(root)]) == 1
+    assert "corrupted feature cache" in capsys.readouterr().err
+    ckpt = tmp_path / "ckpt"
+    assert main(["train", "--model", "depth", "--data", str(root), "--out", str(ckpt), "--no-progress"]) == 1
+    assert "corrupted feature cache" in _one_line(capsys) and not ckpt.exists()  # nothing left behind
 
 
 # --- byte-identical checkpoints ---------------------------------------------------------------------

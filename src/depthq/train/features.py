@@ -150,6 +150,23 @@ def compute_features(
     return n_frames / seconds
 
 
+def verify_caches(dataset: Dataset) -> list[str]:
+    """One message per feature cache of `dataset` whose array does not match the SHA-256 its index
+    records (`depthq dataset verify`); a stale or unchecked cache is no problem: it is computed again."""
+    problems = []
+    for index_path in sorted((dataset.root / FEATURES).glob(f"*/{INDEX}")):
+        try:
+            recorded = read_json(index_path).get(SHA256)
+        except (DataError, AttributeError) as err:
+            problems.append(f"{index_path}: unreadable ({err}); delete {index_path.parent}")
+            continue
+        array = index_path.parent / ARRAY
+        if recorded is not None and (not array.is_file() or file_sha256(array) != recorded):
+            problems.append(f"{array}: corrupted feature cache (its SHA-256 is not the one {INDEX} "
+                            f"records); delete {index_path.parent}: the next training computes it afresh")
+    return problems
+
+
 def remove_stale(folder: Path) -> None:
     """Remove the temporary arrays of computations whose process is gone (killed): their PID is in
     the name, and a live one (another training computing the same cache) is left alone."""
