@@ -29,7 +29,10 @@ SHA-256 of its tensor bytes in its own safetensors metadata ("sha256"), written 
 write as the tensors. Reading checks it, so a file whose bytes changed after it was written (a
 flipped bit, a bad copy) fails with a message naming it instead of driving with wrong weights; a
 truncated or malformed file fails as well. Files written before the digest was recorded still
-load, with a warning that they cannot be verified.
+load, with a warning that they cannot be verified. config.json and the weights' JSON sidecars
+(best.json, ...: `write_sidecar`) carry their own SHA-256 (`depthq.checksum`): one edited after it was
+written is refused; one written before checksums is read as it is. Weight files' headers are written
+with sorted keys, so equal tensors and metadata give equal bytes in any process.
 
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step

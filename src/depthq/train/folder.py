@@ -13,7 +13,8 @@ a killed training's temporaries are removed when it resumes):
     average.safetensors      the mean of the weights after each epoch of the training's last
                              fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
-                             the epochs averaged, their count, the mean's validation loss)
+                             the epochs averaged, their count, the mean's validation loss), each with
+                             its checksum (`depthq.nets.checkpoint.write_sidecar`)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch;
                              the seconds, a timing, are a log: no other file holds one)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
