@@ -318,8 +318,8 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     save_epoch = trainer.folder.save_epoch
 
     def interrupted(out: Path, model: object, optimizer: object, rng: object, state: TrainState,
-                    *args: object) -> None:
-        save_epoch(out, model, optimizer, rng, state, *args)
+                    *args: object, **kwargs: object) -> None:
+        save_epoch(out, model, optimizer, rng, state, *args, **kwargs)
         if state.epoch == 3:
             raise KeyboardInterrupt
 
