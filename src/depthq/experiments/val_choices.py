@@ -21,6 +21,7 @@ from depthq.configio import read_json
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.checkpoint import read_sidecar
 from depthq.train.config import TrainConfig
+from depthq.train.folder import epoch_seconds
 from depthq.train.trainer import train
 
 CANYONS = "val:1000-1019"
@@ -94,7 +95,8 @@ def run_variant(
         result = evaluate(str(ckpt), ev, config, progress=False, video=False)
     s = result["summary"]
     best, last = read_sidecar(ckpt, "best"), read_sidecar(ckpt, "last")
-    print(f"{name}: best epoch {best['epoch']} of {last['epoch']}, {last['seconds']:.1f} s/epoch", flush=True)
+    took = epoch_seconds(ckpt).get(last["epoch"], float("nan"))
+    print(f"{name}: best epoch {best['epoch']} of {last['epoch']}, {took:.1f} s/epoch", flush=True)
     return {
         "variant": name,
         "val_loss": best["val_loss"],

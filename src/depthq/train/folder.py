@@ -229,8 +229,9 @@ def save_epoch(
         atomic_write_bytes(out / "average.safetensors", weights_bytes(mean, {"epoch": str(state.epoch)}))
         val = dict(zip(("val_loss", "val_loss_std"), average_loss, strict=True)) if average_loss else {}
         write_sidecar(out, "average", {"epochs": [average_from, state.epoch], "count": averaged, **val})
-    logged = _logged_seconds(out / METRICS)
-    logged[state.epoch] = "" if seconds is None else str(seconds)
+    logged = epoch_seconds(out)
+    if seconds is not None:
+        logged[state.epoch] = seconds
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()
@@ -238,11 +239,12 @@ def save_epoch(
     atomic_write_bytes(out / METRICS, text.getvalue().encode())
 
 
-def _logged_seconds(path: Path) -> dict[int, str]:
-    """epoch → its seconds, as metrics.csv logged them ({} without one)."""
+def epoch_seconds(out: Path) -> dict[int, float]:
+    """epoch → the seconds it took, as metrics.csv logged them (none for an epoch it lacks)."""
     try:
-        with path.open(newline="") as f:
-            return {int(row["epoch"]): row.get("seconds") or "" for row in csv.DictReader(f)}
+        with (out / METRICS).open(newline="") as f:
+            rows = list(csv.DictReader(f))
+        return {int(row["epoch"]): float(row["seconds"]) for row in rows if row.get("seconds")}
     except (FileNotFoundError, KeyError, ValueError, TypeError):
         return {}
 
