@@ -92,3 +92,15 @@ def test_a_bad_config_value_exits_2_with_one_line(tmp_path, capsys: pytest.Captu
                  "--dropout", "1.5"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "dropout" in err and "1.5" in err
+
+
+def test_the_cli_reference_page_is_current() -> None:
+    """docs/cli.md is generated from the parsers; a flag added or changed without regenerating it fails
+    here, with the command that regenerates it."""
+    from pathlib import Path
+
+    from depthq.cli_reference import reference
+
+    page = Path(__file__).parents[1] / "docs" / "cli.md"
+    assert page.read_text() == reference(), "docs/cli.md is stale: python -m depthq.cli_reference docs/cli.md"
+    assert "## `depthq train`" in page.read_text() and "--epochs" in page.read_text()

@@ -129,7 +129,7 @@ def test_resume_is_a_no_op_when_complete(reference):
 
 def test_probe_statistics_on_train_canyons_and_no_eval_canyons(tmp_path, capsys):
     """Table II statistics of OU runs without a camera (the oracles: tests/test_oracle.py)."""
-    from depthq.experiments.probe import PAPER_FRAMES_PER_RUN, format_stats, ou_statistics
+    from depthq.evaluate.probe import PAPER_FRAMES_PER_RUN, format_stats, ou_statistics
 
     stats = ou_statistics(4.0, runs=6)
     assert stats["runs"] == 6 and 0 < stats["kept_share"] <= 1 and stats["frames_per_kept_run"] >= 20

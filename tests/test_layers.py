@@ -150,6 +150,13 @@ def test_no_folder_imports_a_later_layer_or_a_sibling() -> None:
     assert not bad, "layer order broken:\n" + "\n".join(sorted(bad))
 
 
+def test_no_verb_imports_an_experiment() -> None:
+    """The verbs ship with the package; the experiments are measurements behind the docs, so nothing a
+    verb runs may depend on one."""
+    edges = _folder_imports()
+    assert "experiments" not in {*edges["scripts"], *edges["cli"]}, edges["scripts"].get("experiments")
+
+
 def test_no_folder_loop() -> None:
     graph = {folder: set(targets) for folder, targets in _folder_imports().items()}
     assert not _cycles(graph), f"folders that import each other round a loop: {_cycles(graph)}"

@@ -16,13 +16,15 @@ source against it, folders and files):
                                             `make_policy`, which builds any policy from its spec
     ← train                                 the trainer, its checkpoints, and the offline metric that
                                             re-runs its validation
-    ← evaluate | deploy                     online evaluation | ONNX export and the robot step
+    ← evaluate | deploy                     online evaluation and the calibration probe (`depthq probe`) |
+                                            ONNX export and the robot step
     ← pipeline                              a sweep's grid, presets, run folder and resumable stages
     ← report | bench                        a sweep folder's tables, figures, findings and HTML report |
                                             `depthq bench` figures
-    ← experiments                           the measurements behind the docs, run as modules, and the
-                                            calibration probe (`depthq probe`)
-    ← scripts ← cli                         one module per verb, the `depthq` command
+    ← experiments                           the measurements behind the docs, run as modules (no verb
+                                            imports them)
+    ← scripts ← cli, cli_reference          one module per verb, the `depthq` command, its reference
+                                            page (docs/cli.md)
 
 Names joined by `,` form one unit, whose modules may import each other; units on one line (`|`) do
 not import each other. This root module runs first and imports only `depthq.sim`'s `__init__` (the

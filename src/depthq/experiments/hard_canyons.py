@@ -3,7 +3,7 @@
     python -m depthq.experiments.hard_canyons [OUT]   # the table, and OUT/hard_canyons.png (default docs/)
 
 For each candidate generator config (narrower → curvier → more pillars), without a camera (only the
-LiDAR decides, as `depthq.experiments.probe` does):
+LiDAR decides, as `depthq.evaluate.probe` does):
 
 - the heuristic expert drives the 20 canyons hard/val:1000-1019, seeded as `depthq evaluate` seeds
   them (sensor noise seed = canyon index), with the family's time limit (derived from its length);

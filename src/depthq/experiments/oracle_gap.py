@@ -41,9 +41,9 @@ from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.oracle import Oracle
+from depthq.evaluate.probe import agreement_file, measure_agreement
 from depthq.experiments.cells import mean_interval, ranks_driving
 from depthq.experiments.cli import guarded
-from depthq.experiments.probe import agreement_file, measure_agreement
 from depthq.nets.checkpoint import load_qnet
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset

@@ -36,10 +36,10 @@ from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError
 from depthq.evaluate.online import evaluate
 from depthq.evaluate.oracle import Oracle
+from depthq.evaluate.probe import measure_agreement
 from depthq.experiments.cells import evaluation_summary, ranks_driving
 from depthq.experiments.cli import guarded
 from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
-from depthq.experiments.probe import measure_agreement
 from depthq.nets.checkpoint import (
     chosen_weights,
     read_config,

@@ -9,9 +9,6 @@ from pathlib import Path
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 
-_HELP = {"data": "dataset folder it learns from: floor and monodepth, its camera and odometry (may be the "
-                 "one to label); perception, its LiDAR (ANOTHER canyon family than those to label)"}
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from depthq.train.labeller import LabellerConfig  # torch: when this verb's flags are built
@@ -19,7 +16,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="labeller folder (created; a finished one kept)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_config_arguments(p, LabellerConfig, more_help=_HELP)
+    add_config_arguments(p, LabellerConfig)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,7 +21,7 @@ def _rates(text: str) -> tuple[float, ...]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hz", default="4", help="candidate decision rates, comma-separated, e.g. 10,5,4")
     p.add_argument("--parts", default="stats,oracle,dqn",
-                   help="some of stats, oracle, dqn, agreement (see depthq.experiments.probe)")
+                   help="some of stats, oracle, dqn, agreement (see depthq.evaluate.probe)")
     p.add_argument("--oracle", default="depth:1",
                    help="oracles of the oracle and agreement parts, comma-separated: depth:K[:RULE] (the "
                    "true bins 1..K frames ahead of each action held) or coll:K (a bump within K frames)")
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.experiments.probe import format_stats, probe  # MuJoCo and torch: when this verb runs
+    from depthq.evaluate.probe import format_stats, probe  # MuJoCo and torch: when this verb runs
 
     if split_family(args.canyons)[1].startswith("eval"):
         raise ConfigError(f"--canyons {args.canyons!r}: the eval canyons are the test set; probe in val ones")

@@ -67,7 +67,7 @@ class CanyonEnv(gym.Env):
         self, config: EnvConfig | None = None, render_mode: str | None = None, camera: bool = True
     ) -> None:
         """`camera=False` skips rendering (the image stays black), for what needs no pixels: run
-        statistics and the LiDAR oracle (`depthq.experiments.probe`)."""
+        statistics and the LiDAR oracle (`depthq.evaluate.probe`)."""
         self.config = config or EnvConfig()
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"unknown render_mode {render_mode!r}; expected None or 'rgb_array'")
