@@ -26,7 +26,7 @@ from depthq.nets.checkpoint import load_qnet, read_sidecar, weights_bytes
 from depthq.nets.trunk import DEFAULT_TRUNK
 from depthq.train.features import ARRAY, cache_dir, load_features
 
-FAST = {"train_batches": 4, "val_batches": 1, "batch_size": 16}
+FAST = {"train_batches": 8, "val_batches": 1, "batch_size": 16}
 
 
 def _python(code: str) -> subprocess.Popen:
@@ -204,6 +204,7 @@ def test_a_killed_feature_computation_is_cleaned_up_and_a_flipped_cache_byte_is_
 # --- byte-identical checkpoints ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_weight_files_are_byte_identical_across_processes() -> None:
     code = ("import hashlib, torch\nfrom depthq.nets.checkpoint import weights_bytes\n"
             "b = weights_bytes({'w': torch.arange(6.0)}, {'epoch': '3', 'state': '{}', 'averaged': 'a+b'})\n"
@@ -230,7 +231,7 @@ def test_a_training_resumed_after_kill_9_writes_the_same_bytes(small_dataset: Pa
     from depthq.train.trainer import train
 
     config = TrainConfig(model="depth", data=str(small_dataset), epochs=3, average=0.5, snapshots=(2,),
-                         **{**FAST, "train_batches": 16})
+                         **FAST)
     killed = tmp_path / "killed"
     worker = _python(
         "import json\nfrom depthq.configio import from_dict\nfrom depthq.train.config import TrainConfig\n"
