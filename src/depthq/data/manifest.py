@@ -222,8 +222,18 @@ class Dataset:
         return new
 
     def reader(self, entry: RunEntry) -> RunReader:
-        """An open reader of a run's file, checked against the manifest first."""
-        return RunReader(self.path(entry), entry.info)
+        """An open reader of a run's file, checked against its manifest row: its size and hash, then
+        its metadata (so a row edited by hand, its frame count or index, is not read as other data)."""
+        reader = RunReader(self.path(entry), entry.info)
+        if reader.meta != entry.run_meta():
+            reader.close()
+            differing = _differing_keys(to_dict(reader.meta), to_dict(entry.run_meta()))
+            raise DataError(
+                f"{self.path(entry)}: differs from its row in {self.root / MANIFEST} in "
+                f"{', '.join(differing)}; the manifest was changed: restore it (`depthq dataset verify "
+                f"{self.root}` lists every problem)"
+            )
+        return reader
 
     def read_run(self, entry: RunEntry, images: bool = True) -> Run:
         with self.reader(entry) as reader:
@@ -234,15 +244,9 @@ class Dataset:
         problems = []
         for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
-                run = self.read_run(entry)
+                self.read_run(entry)
             except DataError as err:
                 problems.append(str(err))
-                continue
-            if run.meta != entry.run_meta():
-                differing = _differing_keys(to_dict(run.meta), to_dict(entry.run_meta()))
-                problems.append(
-                    f"{self.path(entry)}: differs from its manifest row in {', '.join(differing)}"
-                )
         listed = {self.path(entry) for entry in self.entries()}
         for path in sorted((self.root / RUNS).glob("*.h5")):
             if path not in listed:

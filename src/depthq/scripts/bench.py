@@ -130,7 +130,11 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         r = bench_features(args.data, n=args.frames, device=args.device, precisions=precisions)
         each = [f"{p['frames_per_s']} frames/s" + (f" ({name})" if len(precisions) > 1 else "")
                 for name, p in r["precisions"].items()]
-        return r, "; ".join(each) + f" ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)"
+        check = r["check"]
+        return r, ("; ".join(each) + f" ({r['trunk']}, {r['input_size']} px, decode + resize + trunk); "
+                   f"the cache's check when read: {check['frames_per_s']:.0f} frames/s "
+                   f"({check['mb_per_s']:.0f} MB/s, {100 * check['share_of_compute']:.2f} % of computing "
+                   "them)")
     if args.what == "train":
         _positive("--seconds", args.seconds)
         from depthq.bench.train import bench_train  # torch: off the CLI's startup
