@@ -122,6 +122,12 @@ def ou_evaluation_one_worker(tmp_path_factory):
     return config, evaluate("ou", out, config, workers=1, progress=False, video=False)
 
 
+def unchecked(record: dict) -> dict:
+    """A checkpoint's config.json record, edited by a test, as a depthq before checksums wrote it: without
+    its "sha256" (an edited record with it is refused as changed, docs/formats.md#checksums)."""
+    return {k: v for k, v in record.items() if k != "sha256"}
+
+
 def without_timing(runs: list[dict]) -> list[dict]:
     """Evaluated runs less what depends on the machine's speed."""
     return [{k: v for k, v in r.items() if k != "decision_ms_median"} for r in runs]

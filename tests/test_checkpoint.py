@@ -11,6 +11,7 @@ from pathlib import Path
 import onnx
 import pytest
 import torch
+from conftest import unchecked
 from safetensors.torch import load_file
 
 from depthq.cli import main
@@ -77,7 +78,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     shutil.rmtree(a / "data")
     # As if trained on 5 Hz data: what a policy drives at must come from the checkpoint.
     record["policy"]["decision_hz"] = HZ = 5.0
-    (b / "ckpt" / "config.json").write_text(json.dumps(record))
+    (b / "ckpt" / "config.json").write_text(json.dumps(unchecked(record)))
     ckpt = str(b / "ckpt")
     c.mkdir()
     monkeypatch.chdir(c)
@@ -127,7 +128,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
 
     future = tmp_path / "future"
     shutil.copytree(out, future)
-    (future / "config.json").write_text(json.dumps({**record, "format_version": 7}))
+    (future / "config.json").write_text(json.dumps(unchecked({**record, "format_version": 7})))
     with pytest.raises(ConfigError, match=r"future/config\.json: checkpoint format version 7, .* 1 to 3"):
         load_qnet(future)
     assert main(["export", str(future), "--out", str(tmp_path / "onnx")]) == 2
@@ -144,7 +145,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     shutil.copytree(out, before)
     v3 = {**record, "train": {k: v for k, v in record["train"].items() if k != "head_form"}}
     v3["head"] = {k: v for k, v in record["head"].items() if k != "form"}
-    (before / "config.json").write_text(json.dumps(v3))
+    (before / "config.json").write_text(json.dumps(unchecked(v3)))
     assert read_config(before)["train"] == record["train"]
     assert load_qnet(before)[0].head.config.form == "concat"
 
@@ -155,7 +156,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     old_train = {("select" if k == "weights" else k): v for k, v in record["train"].items()}
     old_policy = {("selection" if k == "rule" else k): v for k, v in record["policy"].items()}
     old_names = {**record, "train": {**old_train, "select": "final"}, "policy": old_policy}
-    (renamed / "config.json").write_text(json.dumps(old_names))
+    (renamed / "config.json").write_text(json.dumps(unchecked(old_names)))
     upgraded = read_config(renamed)
     assert upgraded["train"] == {**record["train"], "weights": "final"}
     assert upgraded["policy"] == record["policy"]
@@ -172,7 +173,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     shutil.copytree(out, flat)
     flat_train = {k: v for k, v in record["train"].items() if k != "samples"} | record["train"]["samples"]
     assert "horizon" in flat_train and "samples" not in flat_train
-    (flat / "config.json").write_text(json.dumps({**record, "train": flat_train}))
+    (flat / "config.json").write_text(json.dumps(unchecked({**record, "train": flat_train})))
     assert read_config(flat)["train"] == record["train"]
     assert load_qnet(flat)[1]["train"]["samples"]["horizon"] == 5
     assert _trained(_config(data, epochs=1, head_form="concat"), flat)
@@ -184,9 +185,9 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     shutil.copytree(out, old)
     v2 = {k: v for k, v in record.items() if k not in ("dataset", "policy")}
     v2["train"] = {k: v for k, v in record["train"].items() if k not in ("weights", "snapshots")}
-    (old / "config.json").write_text(json.dumps(
+    (old / "config.json").write_text(json.dumps(unchecked(
         {**v2, "format_version": 2, "data_fingerprint": record["dataset"]["fingerprint"]}
-    ))
+    )))
     net, upgraded = load_qnet(old)
     assert upgraded["policy"] == record["policy"] and upgraded["train"] == record["train"]
     head = {f"head.{k}": v for k, v in net.head.state_dict().items()}
@@ -317,8 +318,8 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     save_epoch = trainer.folder.save_epoch
 
     def interrupted(out: Path, model: object, optimizer: object, rng: object, state: TrainState,
-                    *args: object) -> None:
-        save_epoch(out, model, optimizer, rng, state, *args)
+                    *args: object, **kwargs: object) -> None:
+        save_epoch(out, model, optimizer, rng, state, *args, **kwargs)
         if state.epoch == 3:
             raise KeyboardInterrupt
 

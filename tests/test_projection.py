@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import unchecked
 from paper_head import paper_head
 from safetensors.torch import load_file
 from test_lockstep import assert_batch_decides_as_alone
@@ -172,7 +173,7 @@ def test_a_projected_training_fits_once_and_resumes(projected: Path, tmp_path: P
     assert record["train"]["feature_projection"] == 0
     for block in ("train", "head"):
         del record[block]["feature_projection"]
-    (old / "config.json").write_text(json.dumps(record))
+    (old / "config.json").write_text(json.dumps(unchecked(record)))
     net, _ = load_qnet(old)
     assert net.head.projection is None and "head.projection.weight" not in load_file(old / "last.safetensors")
     train(replace(plain, epochs=2), old, progress=False)

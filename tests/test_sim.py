@@ -166,9 +166,9 @@ def test_env_id_works_as_in_every_gymnasium_package(code: str) -> None:
     assert result.returncode == 0, result.stderr
 
 
-def test_randomized_appearance_changes_colours_not_geometry():
+def test_colours_look_changes_colours_not_geometry():
     plain = CanyonEnv()
-    rand = CanyonEnv(EnvConfig(world=WorldConfig(appearance="randomized")))
+    rand = CanyonEnv(EnvConfig(world=WorldConfig(look="colours")))
     a, _ = plain.reset(seed=0, options={"canyon": "eval:4"})
     b, _ = rand.reset(seed=0, options={"canyon": "eval:4"})
     np.testing.assert_array_equal(a["scan"], b["scan"])
@@ -186,7 +186,7 @@ def test_randomized_appearance_changes_colours_not_geometry():
         (lambda: CanyonId("eval", 20), "20"),
         (lambda: CanyonId.parse("nowhere:1"), "nowhere"),
         (lambda: CanyonConfig(n_segments=0), "n_segments"),
-        (lambda: WorldConfig(appearance="neon"), "neon"),
+        (lambda: WorldConfig(look="neon"), "neon"),
     ],
 )
 def test_bad_configuration_names_the_value(make, name):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import unchecked
 from safetensors.torch import load, load_file, save
 
 from depthq.cli import main
@@ -95,7 +96,7 @@ def test_another_config_in_the_same_folder_is_refused(data: Path, tmp_path: Path
     # A folder written before a field existed is not resumed under today's default for it.
     record = read_json(out / "config.json")
     del record["train"]["action_scale"]
-    (out / "config.json").write_text(json.dumps(record))
+    (out / "config.json").write_text(json.dumps(unchecked(record)))
     with pytest.raises(ConfigError, match="action_scale"):
         train(_config(data, epochs=1), out, progress=False)
 
@@ -260,7 +261,7 @@ def test_a_checkpoint_older_than_precision_loads_and_resumes_as_fp32(data: Path,
     out = train(_config(data, epochs=1), tmp_path / "old", progress=False)
     record = read_json(out / "config.json")
     del record["train"]["precision"]  # as written before the field existed
-    (out / "config.json").write_text(json.dumps(record))
+    (out / "config.json").write_text(json.dumps(unchecked(record)))
     assert QNetPolicy.from_checkpoint(out).kind == "depth"
     train(_config(data, epochs=2), out, progress=False)
     assert read_json(out / "last.json")["epoch"] == 2
@@ -295,7 +296,7 @@ def test_bad_inputs(data: Path, tmp_path: Path) -> None:
         load_qnet(out, model="coll")
     record = read_json(out / "config.json")
     record["head"]["kind"] = "sonar"
-    (out / "config.json").write_text(json.dumps(record))
+    (out / "config.json").write_text(json.dumps(unchecked(record)))
     with pytest.raises(ConfigError, match="sonar"):
         load_qnet(out)
 

@@ -4,7 +4,8 @@ Layers, each importing only from those before it; every name is a folder (a pack
 layer, a module, so the folders show the layers (tests/test_layers.py reads this list and checks the
 source against it, folders and files):
 
-    errors, configio, parallel, flags,      base: no layer below
+    errors, configio, checksum, lock,       base: no layer below (checksum: the SHA-256 a JSON record
+    parallel, flags,                        or file carries; lock: a folder's one writer)
     host
     ← sim                                   canyons, MuJoCo world, sensors, the Gymnasium env
     ← control                               the Policy interface, OU exploration, the depth heuristic,

@@ -7,9 +7,13 @@ import importlib
 import os
 import sys
 import traceback
+from contextlib import ExitStack
+from pathlib import Path
+from typing import NoReturn
 
 from depthq import __version__
 from depthq.errors import explain
+from depthq.lock import exclusive
 
 DEBUG_ENV = "DEPTHQ_DEBUG"
 
@@ -33,10 +37,17 @@ VERBS: dict[str, str] = {
 }
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, but a bad flag is one line (what is wrong, where --help is), not the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     """Every verb with its summary, and the flags of `verb` alone: building a verb's flags imports its
     config classes (MuJoCo's for collect), which only that verb should pay for."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="depthq",
         description="Monocular collision avoidance from future depth: collect, train, evaluate, reproduce.",
     )
@@ -66,7 +77,10 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in before_verb or os.environ.get(DEBUG_ENV, "") not in ("", "0")
     try:
         args = build_parser(verb).parse_args(argv)  # a verb's flags may load MuJoCo, and so fail
-        return int(args._run(args) or 0)
+        with ExitStack() as held:
+            for flag, path in written(args):
+                held.enter_context(exclusive(path, flag))
+            return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print(f"depthq {verb}: interrupted; run the same command again to resume.", file=sys.stderr)
         return 130
@@ -78,6 +92,14 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"depthq {verb}: {line}", file=sys.stderr)
         return status
+
+
+def written(args: argparse.Namespace) -> list[tuple[str, Path]]:
+    """The folders a verb writes, by the flag that names them, each locked for the verb's life
+    (`depthq.lock`): its --out, or what it names in `_writes` (label: the dataset it labels)."""
+    names = getattr(args, "_writes", ("out",))
+    return [(f"--{name}" if name == "out" else name.upper(), getattr(args, name))
+            for name in names if isinstance(getattr(args, name, None), Path)]
 
 
 if __name__ == "__main__":

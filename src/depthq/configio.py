@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import tempfile
 import types
@@ -81,6 +82,17 @@ def _convert(hint: Any, value: Any) -> Any:
     return value
 
 
+# Seeds reach NumPy (non-negative only), Gymnasium and torch (below 2**64): one range suits all three,
+# with room for the per-run offsets added to them.
+SEED_LIMIT = 2**63
+
+
+def check_seed(seed: object, flag: str = "--seed") -> None:
+    """A seed is an integer in [0, 2**63): anything else is a ConfigError naming `flag`."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < SEED_LIMIT:
+        raise ConfigError(f"{flag} must be an integer >= 0 (and < 2**63), got {seed!r}")
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write to a temporary sibling, fsync, rename: a reader never sees half a file."""
     path = Path(path)
@@ -98,17 +110,35 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 
 def write_json(path: Path, obj: Any) -> None:
-    """Atomically write JSON (sorted keys, so equal content gives equal bytes)."""
-    atomic_write_bytes(Path(path), (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode())
+    """Atomically write strict JSON (sorted keys, so equal content gives equal bytes; a non-finite
+    number, which JSON cannot spell, as null)."""
+    text = json.dumps(finite(obj), indent=2, sort_keys=True, allow_nan=False)
+    atomic_write_bytes(Path(path), (text + "\n").encode())
+
+
+def finite(value: Any) -> Any:
+    """`value` with every NaN or infinite float (in lists, tuples and dicts) replaced by None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    return value
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON")
 
 
 def read_json(path: Path) -> Any:
+    """Strict JSON: NaN and Infinity, which Python's json would read, are refused (DataError)."""
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(), parse_constant=_refuse_constant)
     except FileNotFoundError:
         raise
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+    except (ValueError, UnicodeDecodeError) as err:
         raise DataError(f"{path}: not valid JSON ({err})") from err
 
 

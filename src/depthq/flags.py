@@ -22,6 +22,7 @@ import dataclasses
 import functools
 import inspect
 import io
+import math
 import re
 import textwrap
 import tokenize
@@ -315,8 +316,11 @@ def _parse(hint: Any, text: str) -> Any:
         raise ValueError(f"expected true or false, got {text!r}")
     if hint in (int, float):
         try:
-            return hint(text)
+            value = hint(text)
         except ValueError:
-            kind = "an integer" if hint is int else "a number"
-            raise ValueError(f"expected {kind}, got {text!r}") from None
+            value = None
+        if value is None or not math.isfinite(value):  # JSON, where every config goes, has no nan nor inf
+            kind = "an integer" if hint is int else "a finite number"
+            raise ValueError(f"expected {kind}, got {text!r}")
+        return value
     return text

@@ -18,12 +18,14 @@ def bench_evaluate(
     workers: int = 2,
     time_limit_s: float | None = None,
     device: str = "auto",
+    look: str | None = None,
 ) -> dict:
-    """Wall seconds of `drive_canyons` for `spec` in `canyons`, sequential then lock-step: workers'
-    start (processes, policy, simulators) and every run, no files written, no offline metric."""
+    """Wall seconds of `drive_canyons` for `spec` in `canyons` (in `look`; None: their family's own),
+    sequential then lock-step: workers' start (processes, policy, simulators) and every run, no files
+    written, no offline metric."""
     where = str(resolve_device(device))
     spec = PolicySpec.parse(spec).resolved()
-    config = at_policy_rate(EvalConfig(canyons=canyons, time_limit_s=time_limit_s), spec)
+    config = at_policy_rate(EvalConfig(canyons=canyons, time_limit_s=time_limit_s, look=look), spec)
     seconds, runs = {}, {}
     for name, lockstep in (("sequential", False), ("lockstep", True)):
         start = time.perf_counter()

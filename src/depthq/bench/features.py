@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import itertools
+import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
+from depthq.checksum import file_sha256
 from depthq.data.manifest import Dataset
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
@@ -23,7 +26,9 @@ def bench_features(
     """Frames/s of the feature cache's pipeline on the first `n` frames of a dataset: JPEG decode and
     resize in a background thread, the frozen trunk in the caller's, as `load_features` runs them;
     once per precision ("bf16": the trunk under bfloat16 autocast, measured only: the cache is fp32's).
-    The first precision's figures are also the result's own keys."""
+    The first precision's figures are also the result's own keys. `check`: what checking the cache
+    costs whenever it is read (the SHA-256 of its array, from disk), in frames/s and as a share of
+    computing the same frames' features."""
     check_precisions(precisions, "bench features")
     torch.set_num_threads(trunk_threads())
     dataset = Dataset.open(Path(data))
@@ -44,5 +49,23 @@ def bench_features(
             seconds = time.perf_counter() - start
         each[precision] = {"frames": frames, "seconds": round(seconds, 2),
                            "frames_per_s": round(frames / seconds, 1)}
+    check = _check_cost(frames, net.feature_dim, each[precisions[0]]["frames_per_s"])
     return {"trunk": trunk, "device": str(where), "input_size": size, **each[precisions[0]],
-            "precisions": each, "threads": torch.get_num_threads()}
+            "precisions": each, "threads": torch.get_num_threads(), "check": check}
+
+
+def _check_cost(frames: int, feature_dim: int, compute_frames_per_s: float, repeats: int = 5) -> dict:
+    """The cache check's speed on a float16 array of `frames` rows written to disk (the fastest of
+    `repeats` reads: the page cache holds a cache just used, as it does a training's)."""
+    rows = np.random.default_rng(0).standard_normal((frames, feature_dim)).astype(np.float16)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "features.f16.npy"
+        np.save(path, rows)
+        best = float("inf")
+        for _ in range(repeats):
+            start = time.perf_counter()
+            file_sha256(path)
+            best = min(best, time.perf_counter() - start)
+    rate = frames / best
+    return {"frames_per_s": round(rate, 1), "mb_per_s": round(rows.nbytes / best / 1e6, 1),
+            "share_of_compute": round(compute_frames_per_s / rate, 5)}

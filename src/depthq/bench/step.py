@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -31,7 +32,8 @@ def _ms(fn: Callable[[], object], repeats: int) -> float:
 
 
 def bench_step(
-    spec: str | None = None, canyon: str = "val:1000", steps: int = 50, device: str = "auto", threads: int = 1
+    spec: str | None = None, canyon: str = "val:1000", steps: int = 50, device: str = "auto",
+    threads: int = 1, look: str | None = None,
 ) -> dict:
     """Median ms of each part of a step on one process with `threads` torch threads (an evaluation
     worker has one): the simulator's (physics over one decision period, LiDAR ray cast, render,
@@ -46,7 +48,9 @@ def bench_step(
     torch.set_num_threads(threads)
     where = str(resolve_device(device))
     policy = QNetPolicy.from_checkpoint(spec, device=where) if spec else untrained_depth_policy(where)
-    env = CanyonEnv(EnvConfig(world=world_for(WorldConfig(), canyon_id.family), time_limit_s=1e6))
+    world = world_for(WorldConfig(), canyon_id.family)  # in `look`, or the canyon family's own
+    world = world if look is None else replace(world, look=look)
+    env = CanyonEnv(EnvConfig(world=world, time_limit_s=1e6))
     env.reset(seed=0, options={"canyon": canyon_id})
     world, rng, expert = env.world, np.random.default_rng(0), DepthHeuristic()
     parts: dict[str, list[float]] = {"physics": [], "lidar": [], "render": [], "noise": []}

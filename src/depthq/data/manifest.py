@@ -48,6 +48,7 @@ from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.errors import ConfigError, DataError
 from depthq.sim.canyon import PAPER
+from depthq.sim.look import upgrade_world
 
 MANIFEST = "manifest.json"
 RUNS = "runs"
@@ -70,6 +71,15 @@ class RunEntry(RunMeta):
 
     def run_meta(self) -> RunMeta:
         return RunMeta(**{name: getattr(self, name) for name in meta_fields()})
+
+
+def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
+    """A manifest's collection config in today's shape: a world recorded before looks (`appearance`)
+    names its look (`depthq.sim.look.upgrade_world`), so an older dataset resumes and compares equal."""
+    env = config.get("env") if isinstance(config, dict) else None
+    if not isinstance(env, dict) or not isinstance(env.get("world"), dict):
+        return config
+    return {**config, "env": {**env, "world": upgrade_world(env["world"])}}
 
 
 def run_path(root: Path, split: str, index: int) -> Path:
@@ -99,7 +109,7 @@ class Dataset:
             if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
                 raise ValueError(f"format {data.get('format')!r} version {data.get('format_version')!r}")
             runs = [from_dict(RunEntry, row) for row in data["runs"]]
-            return cls(root, data["config"], int(data["seed"]), runs)
+            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs)
         except (AttributeError, KeyError, TypeError, ValueError) as err:
             raise DataError(f"{path}: not a valid {FORMAT} manifest ({err})") from err
 
@@ -212,8 +222,18 @@ class Dataset:
         return new
 
     def reader(self, entry: RunEntry) -> RunReader:
-        """An open reader of a run's file, checked against the manifest first."""
-        return RunReader(self.path(entry), entry.info)
+        """An open reader of a run's file, checked against its manifest row: its size and hash, then
+        its metadata (so a row edited by hand, its frame count or index, is not read as other data)."""
+        reader = RunReader(self.path(entry), entry.info)
+        if reader.meta != entry.run_meta():
+            reader.close()
+            differing = _differing_keys(to_dict(reader.meta), to_dict(entry.run_meta()))
+            raise DataError(
+                f"{self.path(entry)}: differs from its row in {self.root / MANIFEST} in "
+                f"{', '.join(differing)}; the manifest was changed: restore it (`depthq dataset verify "
+                f"{self.root}` lists every problem)"
+            )
+        return reader
 
     def read_run(self, entry: RunEntry, images: bool = True) -> Run:
         with self.reader(entry) as reader:
@@ -224,15 +244,9 @@ class Dataset:
         problems = []
         for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
-                run = self.read_run(entry)
+                self.read_run(entry)
             except DataError as err:
                 problems.append(str(err))
-                continue
-            if run.meta != entry.run_meta():
-                differing = _differing_keys(to_dict(run.meta), to_dict(entry.run_meta()))
-                problems.append(
-                    f"{self.path(entry)}: differs from its manifest row in {', '.join(differing)}"
-                )
         listed = {self.path(entry) for entry in self.entries()}
         for path in sorted((self.root / RUNS).glob("*.h5")):
             if path not in listed:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from depthq.configio import to_dict
+from depthq.configio import check_seed, to_dict
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.control.policy import Policy
 from depthq.data import DataConfig
@@ -67,6 +67,7 @@ class CollectConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
         if self.runs < 1:
             raise ConfigError(f"--runs must be >= 1, got {self.runs}")
         if self.val_runs < 0:

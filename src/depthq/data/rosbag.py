@@ -48,7 +48,7 @@ import struct
 import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import astuple, dataclass
+from dataclasses import astuple, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -235,13 +235,15 @@ class ImportConfig:
 
     topics: Topics = Topics()
     max_gap_s: float = 1.0
-    val_runs: int = 1
+    # The last N runs form the val split, at least one run left to train on (more is refused); none:
+    # 1, or 0 for a recording of one run. The dataset's config records the number taken.
+    val_runs: int | None = None
     jpeg_quality: int = JPEG_QUALITY
 
     def __post_init__(self) -> None:
-        if not self.max_gap_s > 0:
-            raise ConfigError(f"--max-gap must be > 0 s, got {self.max_gap_s}")
-        if self.val_runs < 0:
+        if not 0 < self.max_gap_s < math.inf:
+            raise ConfigError(f"--max-gap must be a number of seconds > 0, got {self.max_gap_s}")
+        if self.val_runs is not None and self.val_runs < 0:
             raise ConfigError(f"--val-runs must be >= 0, got {self.val_runs}")
         for name in ("image", "scan", "cmd"):
             topic = getattr(self.topics, name)
@@ -289,12 +291,19 @@ def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), prog
         if not cuts:
             scan = f", with a scan within {config.max_gap_s / 2:g} s" if "scan" in conns else ""
             raise ConfigError(f"{bag}: no run found (no frame while the robot drove{scan}); nothing written")
+        if config.val_runs is None:
+            config = replace(config, val_runs=min(1, len(cuts) - 1))
+        elif config.val_runs > len(cuts) - 1:
+            raise ConfigError(f"--val-runs {config.val_runs}: {bag} holds {len(cuts)} run(s), and at least "
+                              f"one must train: give at most {len(cuts) - 1}; nothing written")
         out.parent.mkdir(parents=True, exist_ok=True)
+        for stale in out.parent.glob(f".{out.name}.*.tmp"):  # a killed import's (its --out is locked)
+            shutil.rmtree(stale, ignore_errors=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
         try:
             record = {"source": rec.source, "bag": bag.name, **to_dict(config)}
             dataset = Dataset.create(staging, record, seed=0)
-            n_val = min(config.val_runs, len(cuts) - 1)
+            n_val = int(config.val_runs)
             bar = tqdm(total=len(cuts), desc="bag import", unit="run", disable=not progress)
             for position, (first, last, images) in enumerate(_runs_with_images(rec, conns, cuts)):
                 is_val = position >= len(cuts) - n_val

@@ -23,7 +23,6 @@ without it is written byte for byte as before, and a reader that knows nothing o
 
 from __future__ import annotations
 
-import hashlib
 import io
 import os
 import tempfile
@@ -34,6 +33,7 @@ import h5py
 import numpy as np
 from PIL import Image
 
+from depthq.checksum import file_sha256
 from depthq.data.camera_labels import LABELS_VERSION, CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.errors import DataError
@@ -73,14 +73,6 @@ def encode_jpeg(image: np.ndarray, quality: int) -> bytes:
         progressive=False,
     )
     return buffer.getvalue()
-
-
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            digest.update(chunk)
-    return digest.hexdigest()
 
 
 def check_file(path: Path, expected: FileInfo) -> None:

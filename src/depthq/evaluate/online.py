@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, provenance, to_dict, write_json
+from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, check_seed, provenance, to_dict, write_json
 from depthq.control.action_selection import Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.errors import ConfigError
@@ -89,8 +89,17 @@ class EvalConfig:
     discount: float = 0.9
     # A lookahead Depth-Q-Net also scores sequences that switch action once.
     switch: bool = False
+    # How the canyons look: flat, colours, textured, heldout or a folder of images (docs/design.md#looks);
+    # none: the family's own. Any policy drives in any look.
+    look: str | None = field(default=None, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
+        if not self.canyons:
+            raise ConfigError("an evaluation drives at least one canyon; --canyons names none")
+        repeated = sorted({c for c in self.canyons if self.canyons.count(c) > 1})
+        if repeated:
+            raise ConfigError(f"--canyons names {', '.join(repeated)} more than once; each is driven once")
         families = sorted({CanyonId.parse(c).family for c in self.canyons})
         if len(families) != 1:
             raise ConfigError(f"the canyons of one evaluation belong to one family, got {families}")
@@ -113,7 +122,9 @@ class EvalConfig:
     def env(self) -> EnvConfig:
         world = WorldConfig() if self.decision_hz is None else WorldConfig(decision_hz=self.decision_hz)
         limit = FAMILIES[self.family].time_limit_s if self.time_limit_s is None else self.time_limit_s
-        return EnvConfig(world=world_for(world, self.family), time_limit_s=limit)
+        world = world_for(world, self.family)
+        world = world if self.look is None else replace(world, look=self.look)
+        return EnvConfig(world=world, time_limit_s=limit)
 
 
 def at_policy_rate(config: EvalConfig, policy_spec: str | PolicySpec) -> EvalConfig:
@@ -147,16 +158,18 @@ def parse_canyon_set(text: str) -> tuple[str, ...]:
     fresh stream that no project code uses ('stream7:0-19'); a family other than the paper's in
     front: 'hard/eval', 'hard/val:1000-1019'."""
     family, rest = split_family(text)
-    stream, _, which = rest.partition(":")
+    stream, colon, which = rest.partition(":")
     fresh = stream.startswith(FRESH)
     if (stream not in ("eval", "val") and not fresh) or (stream != "eval" and not which):
         raise ConfigError(
             f"unknown canyon set {text!r}: expected 'eval', 'eval:0-4', 'eval:2,7', 'val:1000-1019' "
             f"or '{FRESH}7:0-19', optionally after a family, e.g. 'hard/val:1000-1019'"
         )
-    if not which:
+    if not colon:
         return tuple(str(c) for c in eval_canyon_ids(family))
     try:
+        if not which:
+            raise ValueError
         if "-" in which:
             lo, hi = (int(v) for v in which.split("-"))
             indices = list(range(lo, hi + 1))
@@ -314,6 +327,7 @@ def evaluate(
     summary = {
         "policy": description,
         "config": to_dict(config),
+        "look": config.env.world.look,
         "provenance": provenance(),
         "host": host_fingerprint(threads=1),  # every worker decides on one torch thread
         "summary": summarize(ordered),

@@ -29,7 +29,7 @@ from depthq.configio import read_json
 from depthq.data.labels import HORIZON
 from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
-from depthq.nets.checkpoint import chosen_weights, read_config, weights_stem
+from depthq.nets.checkpoint import chosen_weights, read_config, read_sidecar, weights_stem
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import Sweep, parse_setting, retarget, widened
 from depthq.report.reproduce import run_sweep
@@ -141,7 +141,7 @@ def _metrics(root: Path, name: str, hard: bool) -> dict[str, float] | None:
     s = read_json(summary)["summary"]
     # The acting weights' record (best.json, last.json or average.json); an old record's `select` too.
     stem = weights_stem(chosen_weights(read_config(root / "models" / name), None))
-    weights = read_json(root / "models" / name / f"{stem}.json")
+    weights = read_sidecar(root / "models" / name, stem)
     return {
         "successes": s["successes"],
         "distance": s["distance_to_collision_mean"] if hard else s["distance_mean"],

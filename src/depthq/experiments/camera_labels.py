@@ -41,13 +41,13 @@ import json
 import os
 import shutil
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from depthq.configio import atomic_write_bytes, from_dict, read_json, to_dict, write_json
+from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, from_dict, read_json, to_dict, write_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import ERROR_BANDS, stats_report
@@ -102,14 +102,16 @@ class Setup:
     family: str  # the canyon family of its dataset
     canyons: str  # a canyon set, as `depthq evaluate --canyons` takes it
     time_limit_s: float | None = None
+    # the look every policy drives in (docs/design.md#looks); none: the canyons' family's own
+    look: str | None = field(default=None, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:
-        self.eval_config()  # a bad canyon set or time limit: an error before any work
+        self.eval_config()  # a bad canyon set, time limit or look: an error before any work
 
     def eval_config(self) -> EvalConfig:
         """Each policy once in every canyon, its own default weights, at its data's decision rate."""
         return EvalConfig(canyons=parse_canyon_set(self.canyons), time_limit_s=self.time_limit_s,
-                          weights=WEIGHTS)
+                          weights=WEIGHTS, look=self.look)
 
     def record(self) -> dict[str, Any]:
         return {**to_dict(self), "weights": WEIGHTS}
@@ -122,7 +124,7 @@ def claim(out: Path, setup: Setup) -> None:
     if path.is_file():
         held = read_setup(out)
         differ = [f"{k} {getattr(held, k)!r} there, {getattr(setup, k)!r} here"
-                  for k in ("sweep", "time_limit_s") if getattr(held, k) != getattr(setup, k)]
+                  for k in ("sweep", "time_limit_s", "look") if getattr(held, k) != getattr(setup, k)]
         if parse_canyon_set(held.canyons) != parse_canyon_set(setup.canyons):
             differ.append(f"canyons {held.canyons!r} there, {setup.canyons!r} here")
         if differ:
@@ -137,7 +139,8 @@ def read_setup(out: Path) -> Setup:
     if not path.is_file():
         raise ConfigError(f"{out}: not a camera-labels folder (no {SETUP}); make one with `{PROG} run`")
     record = read_json(path)
-    return Setup(record["sweep"], record["family"], record["canyons"], record.get("time_limit_s"))
+    return Setup(record["sweep"], record["family"], record["canyons"], record.get("time_limit_s"),
+                 record.get("look"))
 
 
 def link_copy(source: Path, target: Path) -> None:
@@ -229,6 +232,7 @@ def run(
     seeds: tuple[int, ...] = (0, 1),
     canyons: str | None = None,
     time_limit_s: float | None = None,
+    look: str | None = None,
     labeller_settings: tuple[tuple[str, Any], ...] = (),
     training: tuple[tuple[str, Any], ...] = (),
     workers: int = 1,
@@ -251,7 +255,7 @@ def run(
     family = Dataset.open(sweep / "data").family()
     if family is None:
         raise ConfigError(f"{sweep / 'data'}: a robot's recording has no canyons to drive in")
-    setup = Setup(str(sweep), family, canyons or val_canyons(family), time_limit_s)
+    setup = Setup(str(sweep), family, canyons or val_canyons(family), time_limit_s, look)
     learn_on = str(Path(labeller_data or sweep / "data").resolve())
     if method == "perception" and Dataset.open(Path(learn_on)).family() == family:
         raise ConfigError(f"--labeller-data {learn_on} is of the {family!r} family too: a perception "
@@ -419,6 +423,9 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--canyons", default=None, help=canyons_help)
     go.add_argument("--time-limit", type=float, default=None,
                     help="seconds per evaluation run (default: the canyons' family's)")
+    go.add_argument("--look", default=None,
+                    help="the look every policy drives in: flat, colours, textured, heldout or a folder of "
+                         "images (default: the canyons' family's own)")
     go.add_argument("--labeller-set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a LabellerConfig setting (e.g. steps=300, pool_runs=100); repeatable")
     go.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
@@ -434,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
         seeds = parse_ints(args.seeds, "--seeds")
         if args.action == "run":
             return run(args.sweep, args.out, args.method, labeller_data=args.labeller_data, runs=args.runs,
-                       seeds=seeds, canyons=args.canyons, time_limit_s=args.time_limit,
+                       seeds=seeds, canyons=args.canyons, time_limit_s=args.time_limit, look=args.look,
                        labeller_settings=parse_settings(args.labeller_set, "--labeller-set"),
                        training=parse_settings(args.set, "--set"), workers=args.workers, device=args.device,
                        progress=not args.no_progress)

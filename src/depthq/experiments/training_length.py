@@ -43,10 +43,12 @@ from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.nets.checkpoint import (
     chosen_weights,
     read_config,
+    read_sidecar,
     read_weights,
     snapshot_stem,
     weights_bytes,
     weights_stem,
+    write_sidecar,
 )
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.reproduce import run_sweep
@@ -96,7 +98,7 @@ def average_weights(model: Path, epochs: int, snapshots: tuple[int, ...], out: P
             for key, value in states[-1].items()}
     out.mkdir(parents=True, exist_ok=True)
     shutil.copy(model / "config.json", out / "config.json")
-    write_json(out / "last.json", {**read_json(model / "last.json"), "averaged": stems})
+    write_sidecar(out, "last", {**read_sidecar(model, "last"), "averaged": stems})
     atomic_write_bytes(out / "last.safetensors",
                        weights_bytes(mean, {"epoch": str(epochs), "averaged": "+".join(stems)}))
     return out
@@ -149,7 +151,7 @@ def rows(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: 
             if name == model:  # the sweep drove the checkpoint's own choice: a Coll-Q-Net's best epoch
                 folder = out / "models" / model
                 stem = weights_stem(chosen_weights(read_config(folder), None))
-                epoch = read_json(folder / f"{stem}.json")["epoch"]
+                epoch = read_sidecar(folder, stem)["epoch"]
             summary = evaluation_summary(out / "eval" / name)
             if summary is not None and name in measured:
                 found.append({"seed": seed, "epoch": epoch, "val_loss": val_loss.get(epoch), **measured[name],

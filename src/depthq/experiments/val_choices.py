@@ -19,7 +19,9 @@ from typing import Any
 
 from depthq.configio import read_json
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.checkpoint import read_sidecar
 from depthq.train.config import TrainConfig
+from depthq.train.folder import epoch_seconds
 from depthq.train.trainer import train
 
 CANYONS = "val:1000-1019"
@@ -92,8 +94,9 @@ def run_variant(
         config = eval_config or EvalConfig(canyons=parse_canyon_set(CANYONS))
         result = evaluate(str(ckpt), ev, config, progress=False, video=False)
     s = result["summary"]
-    best, last = read_json(ckpt / "best.json"), read_json(ckpt / "last.json")
-    print(f"{name}: best epoch {best['epoch']} of {last['epoch']}, {last['seconds']:.1f} s/epoch", flush=True)
+    best, last = read_sidecar(ckpt, "best"), read_sidecar(ckpt, "last")
+    took = epoch_seconds(ckpt).get(last["epoch"], float("nan"))
+    print(f"{name}: best epoch {best['epoch']} of {last['epoch']}, {took:.1f} s/epoch", flush=True)
     return {
         "variant": name,
         "val_loss": best["val_loss"],

@@ -29,16 +29,21 @@ SHA-256 of its tensor bytes in its own safetensors metadata ("sha256"), written 
 write as the tensors. Reading checks it, so a file whose bytes changed after it was written (a
 flipped bit, a bad copy) fails with a message naming it instead of driving with wrong weights; a
 truncated or malformed file fails as well. Files written before the digest was recorded still
-load, with a warning that they cannot be verified.
+load, with a warning that they cannot be verified. config.json and the weights' JSON sidecars
+(best.json, ...: `write_sidecar`) carry their own SHA-256 (`depthq.checksum`): one edited after it was
+written is refused; one written before checksums is read as it is. Weight files' headers are written
+with sorted keys, so equal tensors and metadata give equal bytes in any process.
 
 Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
 layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
 Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
 without `precision` a float32 training; a head without `action_scale` takes the action unscaled (1),
 one without `form` is the paper's ("concat"). Fields renamed within version 3 read under their new
-names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`; the sample settings a train
-record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`, `action_lag`) read
-inside `train.samples`, where TrainConfig holds them now. A newer version is refused by name.
+names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`, the
+dataset's `env.world.appearance` as `env.world.look` ("default": "flat", "randomized": "colours"); the
+sample settings a train record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`,
+`action_lag`) read inside `train.samples`, where TrainConfig holds them now.
+A newer version is refused by name.
 """
 
 from __future__ import annotations
@@ -56,10 +61,11 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 
-from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
+from depthq.checksum import read_checked_json, write_checked_json
+from depthq.configio import from_dict, provenance, to_dict
 from depthq.control.action_selection import ACTIONS, RULE_OF
 from depthq.data.labels import SampleConfig
-from depthq.data.manifest import Dataset
+from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
@@ -76,6 +82,7 @@ DIGEST = "sha256"
 # weights → weight file
 _WEIGHT_FILE = {"best": "best", "last": "last", "final": "last", "average": "average"}
 _SNAPSHOT = re.compile(r"epoch:([0-9]+)")
+_FIX = "restore the checkpoint folder from a copy, or train it again (a config is never edited by hand)"
 _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, then the tensor bytes
 # What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
 # its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
@@ -164,7 +171,17 @@ def weights_bytes(tensors: dict[str, torch.Tensor], metadata: dict[str, str] | N
     if DIGEST in metadata:
         raise ConfigError(f"weight metadata key {DIGEST!r} is reserved for the file's digest")
     digest = hashlib.sha256(_tensor_bytes(save_safetensors(tensors, metadata=metadata))).hexdigest()
-    return save_safetensors(tensors, metadata={**metadata, DIGEST: digest})
+    return _sorted_header(save_safetensors(tensors, metadata={**metadata, DIGEST: digest}))
+
+
+def _sorted_header(blob: bytes) -> bytes:
+    """`blob` with its header's keys sorted: safetensors writes its metadata in an order that varies
+    from process to process, so equal tensors and metadata would not give equal bytes."""
+    size = int.from_bytes(blob[:_HEADER_LENGTH], "little")
+    header = json.loads(blob[_HEADER_LENGTH : _HEADER_LENGTH + size])
+    text = json.dumps(header, sort_keys=True, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 8)  # safetensors pads its header with spaces to 8 bytes
+    return len(text).to_bytes(_HEADER_LENGTH, "little") + text + _tensor_bytes(blob)
 
 
 def read_weights(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
@@ -210,7 +227,7 @@ def write_record(
     """Write `folder`/config.json in the current format (`train`: the TrainConfig as a dict;
     `threads`: the torch threads the training runs on, None: this process's)."""
     trunk = str(train["trunk"])
-    write_json(Path(folder) / CONFIG, {
+    write_checked_json(Path(folder) / CONFIG, {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "provenance": provenance(),
@@ -232,7 +249,7 @@ def read_config(folder: Path) -> dict[str, Any]:
     path = Path(folder) / CONFIG
     if not path.is_file():
         raise ConfigError(f"{folder}: not a checkpoint folder (no {CONFIG})")
-    record = read_json(path)
+    record = read_checked_json(path, _FIX)
     found = record.get("format") if isinstance(record, dict) else record
     if found != FORMAT:
         raise ConfigError(f"{path}: not a {FORMAT} config (format {found!r})")
@@ -244,10 +261,23 @@ def read_config(folder: Path) -> dict[str, Any]:
         )
     record = _renamed(record)
     record = record if version == FORMAT_VERSION else _upgrade(record)
+    dataset = record.get("dataset")
+    if isinstance(dataset, dict) and isinstance(dataset.get("env"), dict):  # `appearance` → `look`
+        record = {**record, "dataset": {**dataset, "env": upgrade_config(dataset)["env"]}}
     head = record.get("head")
     if isinstance(head, dict):
         record = {**record, "head": {**_ADDED_HEAD, **head}}
     return {**record, "train": _nested({**_ADDED_TRAIN, **record.get("train", {})})}
+
+
+def write_sidecar(folder: Path, stem: str, record: dict[str, Any]) -> None:
+    """`folder`/`stem`.json: a weight file's epoch and metrics (best.json, ...), with its checksum."""
+    write_checked_json(Path(folder) / f"{stem}.json", record)
+
+
+def read_sidecar(folder: Path, stem: str) -> dict[str, Any]:
+    """`folder`/`stem`.json (`write_sidecar`), its checksum checked."""
+    return read_checked_json(Path(folder) / f"{stem}.json", _FIX)
 
 
 def _nested(train: dict[str, Any]) -> dict[str, Any]:

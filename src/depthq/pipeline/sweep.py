@@ -178,11 +178,13 @@ SETUP_DEFAULTS: dict[str, Any] = {"family": PAPER}
 
 
 def retarget(
-    sweep: Sweep, family: str | None = None, canyons: str | None = None, decision_hz: float | None = None
+    sweep: Sweep, family: str | None = None, canyons: str | None = None, decision_hz: float | None = None,
+    look: str | None = None,
 ) -> Sweep:
     """`sweep` with its data collected in canyon `family`, evaluated in `canyons` (by default that
-    family's eval canyons; e.g. 'hard/val:1000-1019' to choose on val canyons) at `decision_hz`.
-    Evaluation canyons of another family than the sweep's own bring their family's time limit."""
+    family's eval canyons; e.g. 'hard/val:1000-1019' to choose on val canyons) at `decision_hz`, both
+    in `look` (docs/design.md#looks; none: the family's own). Evaluation canyons of another family than
+    the sweep's own bring their family's time limit."""
     changes: dict[str, Any] = {}
     world = sweep.collect.env.world
     if family is not None and family != sweep.family:
@@ -199,6 +201,10 @@ def retarget(
             changes["evaluate"] = tuple({**dict(sweep.evaluate), "time_limit_s": limit}.items())
     if decision_hz is not None:
         world = replace(world, decision_hz=decision_hz)
+    if look is not None:
+        world = replace(world, look=look)
+        evaluate = dict(changes.get("evaluate", sweep.evaluate))
+        changes["evaluate"] = tuple({**evaluate, "look": look}.items())
     if world != sweep.collect.env.world:
         changes["collect"] = replace(sweep.collect, env=replace(sweep.collect.env, world=world))
     return replace(sweep, **changes)

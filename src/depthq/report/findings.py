@@ -88,4 +88,4 @@ def record_evidence(claim_id: str, key: str, evidence: Evidence, path: Path = FI
     for claim in raw["claims"]:
         if claim["id"] == claim_id:
             claim.setdefault("evidence", {})[key] = {"text": evidence.text, "by": evidence.by}
-    atomic_write_bytes(path, (json.dumps(raw, indent=2, ensure_ascii=False) + "\n").encode())
+    atomic_write_bytes(path, (json.dumps(raw, indent=2, ensure_ascii=False, allow_nan=False) + "\n").encode())

@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     into.add_argument("--cmd-topic", help="command topic (default /cmd_vel)")
     into.add_argument("--odom-topic", help="odometry topic (default /odom; '' imports without poses)")
     into.add_argument("--max-gap", type=float, help="seconds between frames that end a run (default 1)")
-    into.add_argument("--val-runs", type=int, help="the last N runs form the val split (default 1)")
+    into.add_argument("--val-runs", type=int, help="the last N runs form the val split, at least one run "
+                      "left to train (default 1; 0 for a recording of one run)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -15,6 +15,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sim = sub.add_parser("sim", help="env steps/s, camera + LiDAR at full resolution (target ≥ 120)")
     sim.add_argument("--steps", type=int, default=1000, help="steps per worker")
     sim.add_argument("--workers", type=int, default=1, help="processes, each stepping its own env")
+    sim.add_argument("--family", default="paper", help="the canyon family driven: paper or hard")
+    sim.add_argument("--look", default=None,
+                     help="looks measured one after the other, comma-separated, e.g. colours,textured: "
+                     "names or folders of images (docs/design.md#looks; default: the family's own)")
     col = sub.add_parser(
         "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
     )
@@ -61,6 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     step.add_argument("--canyon", default="val:1000", help="the canyon driven (its family's world)")
     step.add_argument("--steps", type=int, default=50, help="steps timed, part by part")
     step.add_argument("--threads", type=int, default=1, help="torch threads (an evaluation worker has 1)")
+    for parser in (col, ev, step):
+        parser.add_argument("--look", default=None,
+                            help="the look driven in: flat, colours, textured, heldout or a folder of images "
+                            "(docs/design.md#looks; default: the canyons' family's own)")
     for parser in (sim, col, feat, tr, pol, ev, step):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
     for parser in (feat, tr, pol, ev, step):
@@ -70,6 +78,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _positive(name: str, value: float) -> None:
     if not value > 0:
         raise ConfigError(f"{name} must be > 0, got {value}")
+
+
+def _check_look(look: str | None) -> None:
+    """A bad --look fails here, before any work."""
+    if look is not None:
+        from depthq.sim.look import check_look  # mujoco's package: off the CLI's startup
+
+        check_look(look)
 
 
 def _precisions(text: str) -> tuple[str, ...]:
@@ -83,18 +99,24 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--steps", args.steps)
         _positive("--workers", args.workers)
         from depthq.bench.sim import bench_sim  # mujoco: off the CLI's startup
+        from depthq.sim.world import WorldConfig
 
-        r = bench_sim(args.steps, args.workers)
-        return (
-            r,
-            f"{r['steps_per_s']} env steps/s with {r['workers']} worker(s), max RSS {r['max_rss_mb']} MB",
-        )
+        looks = (None,) if args.look is None else tuple(look.strip() for look in args.look.split(","))
+        for look in looks:  # a bad family or look fails here, before any worker starts
+            WorldConfig(family=args.family, **({} if look is None else {"look": look}))
+        r = bench_sim(args.steps, args.workers, args.family, looks)
+        each = r["looks"] if "looks" in r else {r["look"]: r}
+        figure = "; ".join(f"{look}: {e['steps_per_s']} env steps/s" + (
+            f" (×{r['relative'][look]})" if "relative" in r else "") for look, e in each.items())
+        last = next(iter(each.values()))
+        return r, f"{figure} with {last['workers']} worker(s), max RSS {last['max_rss_mb']} MB"
     if args.what == "collect":
         _positive("--runs", args.runs)
         _positive("--workers", args.workers)
         from depthq.bench.collect import bench_collect  # mujoco: off the CLI's startup
 
-        r = bench_collect(args.runs, tuple(sorted({1, args.workers})))
+        _check_look(args.look)
+        r = bench_collect(args.runs, tuple(sorted({1, args.workers})), args.look)
         last = r[f"w{args.workers}"]
         return r, (
             f"{r['w1']['steps_per_s']} steps/s with 1 worker, {last['steps_per_s']} with {args.workers} "
@@ -108,7 +130,11 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         r = bench_features(args.data, n=args.frames, device=args.device, precisions=precisions)
         each = [f"{p['frames_per_s']} frames/s" + (f" ({name})" if len(precisions) > 1 else "")
                 for name, p in r["precisions"].items()]
-        return r, "; ".join(each) + f" ({r['trunk']}, {r['input_size']} px, decode + resize + trunk)"
+        check = r["check"]
+        return r, ("; ".join(each) + f" ({r['trunk']}, {r['input_size']} px, decode + resize + trunk); "
+                   f"the cache's check when read: {check['frames_per_s']:.0f} frames/s "
+                   f"({check['mb_per_s']:.0f} MB/s, {100 * check['share_of_compute']:.2f} % of computing "
+                   "them)")
     if args.what == "train":
         _positive("--seconds", args.seconds)
         from depthq.bench.train import bench_train  # torch: off the CLI's startup
@@ -128,7 +154,8 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         from depthq.evaluate.online import parse_canyon_set
 
         canyons = parse_canyon_set(args.canyons)
-        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device)
+        _check_look(args.look)
+        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device, args.look)
         return r, (
             f"{r['policy']} in {r['canyons']} canyons ({r['decisions']} decisions), {r['workers']} "
             f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
@@ -139,7 +166,8 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--threads", args.threads)
         from depthq.bench.step import bench_step  # torch, mujoco: off the CLI's startup
 
-        r = bench_step(args.policy, args.canyon, args.steps, args.device, args.threads)
+        _check_look(args.look)
+        r = bench_step(args.policy, args.canyon, args.steps, args.device, args.threads, args.look)
         parts = ", ".join(f"{k} {v}" for k, v in {**r["sim_ms"], **r["policy_ms"]}.items())
         return r, (
             f"ms: {parts}; floor {r['floor_ms_per_step']} ms per lock-step step; a batch of {r['batch']} "

@@ -11,9 +11,11 @@ from depthq.flags import add_config_arguments, config_from_args
 from depthq.parallel import add_executor_arguments, executor_from
 
 # CollectConfig's flags as `depthq collect` spelled them before they were made from it, kept as aliases.
-_ALIASES = {"env.world.decision_hz": ("--hz",), "env.world.family": ("--family",)}
+_ALIASES = {"env.world.decision_hz": ("--hz",), "env.world.family": ("--family",),
+            "env.world.look": ("--look",)}
 _HELP = {"env.world.family": "docs/hard_canyons.md; its canyon generator and look are the defaults of "
-         "--env.world.canyon.* and --env.world.appearance"}
+         "--env.world.canyon.* and --look",
+         "env.world.look": "default: the family's own"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

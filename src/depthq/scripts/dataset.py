@@ -23,7 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     stats.add_argument("dir", type=Path, help="dataset folder")
     stats.add_argument("--json", action="store_true", help="print JSON instead of a table")
     add_config_arguments(stats, DataConfig, exclude=_NOT_STATS)
-    verify = actions.add_parser("verify", help="read every run file and check it against the manifest")
+    verify = actions.add_parser("verify", help="read every run file and check it against the manifest, and "
+                                "every feature cache against its checksum")
     verify.add_argument("dir", type=Path, help="dataset folder")
 
 
@@ -33,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
         record, text = stats_report(dataset, config_from_args(DataConfig, args))
         print(json.dumps(record, indent=2) if args.json else text)
         return 0
-    problems = dataset.verify(progress=True)
+    from depthq.train.features import verify_caches  # torch: only for verify
+
+    problems = dataset.verify(progress=True) + verify_caches(dataset)
     for problem in problems:
         print(problem, file=sys.stderr)
     if problems:

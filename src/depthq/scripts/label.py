@@ -17,6 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--replace", action="store_true",
                    help="replace labels another labeller wrote (refused otherwise, so none are mixed)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(_writes=("dir",))  # the dataset it labels: locked while it does
 
 
 def run(args: argparse.Namespace) -> int:

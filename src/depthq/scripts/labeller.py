@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from depthq.configio import read_json
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.nets.device import DEVICE_HELP
 
@@ -21,11 +20,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.train.labeller import CAMERA_METHODS, CONFIG, LabellerConfig, train_labeller
+    from depthq.train.labeller import CAMERA_METHODS, LabellerConfig, read_record, train_labeller
 
     config = config_from_args(LabellerConfig, args)
     out = train_labeller(config, args.out, progress=not args.no_progress, device=args.device)
-    record = read_json(out / CONFIG)
+    record = read_record(out)
     family = record["source"]["family"]
     if record["name"] in CAMERA_METHODS:
         print(f"labeller: {out} ({record['name']}, fingerprint {record['fingerprint'][:16]}…), learnt from "

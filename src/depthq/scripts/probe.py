@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
+from depthq.configio import write_json
 from depthq.errors import ConfigError
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.sim.canyon import split_family
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs,
                    family, oracles, evaluations, args.predictions)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "probe.json").write_text(json.dumps(result, indent=1))
+    write_json(args.out / "probe.json", result)  # strict JSON, written atomically
     if "stats" in result:
         print(format_stats(result["stats"]))
     for row in result.get("oracle", []):

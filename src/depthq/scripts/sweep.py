@@ -11,13 +11,15 @@ from depthq.parallel import add_executor_arguments, executor_from
 
 # The dataset's settings a sweep may change (its collection config, `Sweep.collect`), by their flags of
 # `depthq collect` (--hz and --family as collect spells them too); each defaults to the preset's.
-_COLLECT = ("runs", "env.world.decision_hz", "env.world.family")
-_ALIASES = {"env.world.decision_hz": ("--hz",), "env.world.family": ("--family",)}
+_COLLECT = ("runs", "env.world.decision_hz", "env.world.family", "env.world.look")
+_ALIASES = {"env.world.decision_hz": ("--hz",), "env.world.family": ("--family",),
+            "env.world.look": ("--look",)}
 _HELP = {
     "runs": "at least the largest size; a run's data does not depend on how many are collected, so --runs "
     "500 --sizes 200,500 trains the models the preset's 900 runs would",
     "env.world.decision_hz": "the evaluations' rate too",
     "env.world.family": "the evaluation canyons become the family's eval canyons",
+    "env.world.look": "the evaluations' look too (default: the family's own)",
 }
 
 
@@ -65,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         "grid": tuple(parse_setting(text) for text in args.set) or None,
     }
     changes = {k: v for k, v in changes.items() if v is not None}
-    target = retarget(base, given.get("env.world.family"), args.canyons, given.get("env.world.decision_hz"))
+    target = retarget(base, given.get("env.world.family"), args.canyons, given.get("env.world.decision_hz"),
+                      given.get("env.world.look"))
     runs = given.get("runs")
     widened_ = bool(changes) or runs is not None or target != base
     sweep = widened(target, runs, name=f"{base.name} sweep" if widened_ else base.name, **changes)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from depthq.configio import read_json
 from depthq.flags import add_config_arguments, config_from_args, flag_name
+from depthq.nets.checkpoint import read_sidecar
 from depthq.nets.device import DEVICE_HELP
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.trunk import TRUNKS
@@ -36,8 +36,8 @@ def run(args: argparse.Namespace) -> int:
 
     config = config_from_args(TrainConfig, args)  # every field from its flag (weights, snapshots, ...)
     out = train(config, args.out, progress=not args.no_progress, device=args.device)
-    best, last = read_json(out / "best.json"), read_json(out / "last.json")
-    average = read_json(out / "average.json") if config.average else None
+    best, last = read_sidecar(out, "best"), read_sidecar(out, "last")
+    average = read_sidecar(out, "average") if config.average else None
     also = f", average.safetensors: epochs {average['epochs'][0]}–{average['epochs'][1]}" if average else ""
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "
           f"last.safetensors: epoch {last['epoch']}{also}; acts with {config.weights})")

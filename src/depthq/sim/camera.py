@@ -15,7 +15,8 @@ from mujoco import gl_context
 class OffscreenCamera:
     """Render a named camera of any model built from the same MJCF assets, into a reused buffer."""
 
-    def __init__(self, model: mujoco.MjModel, width: int, height: int, hidden_groups: tuple[int, ...] = ()):
+    def __init__(self, model: mujoco.MjModel, width: int, height: int, hidden_groups: tuple[int, ...] = (),
+                 shown_groups: tuple[int, ...] = ()):
         self.width, self.height = width, height
         self._gl = gl_context.GLContext(width, height)
         self._gl.make_current()
@@ -25,6 +26,8 @@ class OffscreenCamera:
         self._option = mujoco.MjvOption()
         for group in hidden_groups:
             self._option.geomgroup[group] = 0
+        for group in shown_groups:  # MuJoCo shows groups 0–2 by default
+            self._option.geomgroup[group] = 1
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._rect = mujoco.MjrRect(0, 0, width, height)
@@ -40,6 +43,14 @@ class OffscreenCamera:
         mujoco.mjr_render(self._rect, self._scene, self._context)
         mujoco.mjr_readPixels(self._buffer, None, self._rect, self._context)
         return self._buffer[::-1]
+
+    def upload(self, model: mujoco.MjModel, textures: list[int], meshes: list[int]) -> None:
+        """Give the renderer `model`'s textures and meshes of these ids (changed after it was made)."""
+        self._gl.make_current()
+        for tex in textures:
+            mujoco.mjr_uploadTexture(model, self._context, tex)
+        for mesh in meshes:
+            mujoco.mjr_uploadMesh(model, self._context, mesh)
 
     def close(self) -> None:
         if self._gl is not None:

@@ -276,7 +276,7 @@ class CanyonFamily:
     name: str
     key: int
     canyon: CanyonConfig
-    appearance: str = "default"
+    look: str = "flat"  # its own look (`depthq.sim.look`)
     goal: str = "distance"
     time_limit_s: float = 45.0
 
@@ -298,9 +298,9 @@ HARD_CANYON = CanyonConfig(
 )
 FAMILIES: dict[str, CanyonFamily] = {
     PAPER: CanyonFamily(PAPER, 0, CanyonConfig()),
-    # narrower, curvier, shorter, pillars in the way, randomised look (docs/hard_canyons.md)
+    # narrower, curvier, shorter, pillars in the way, random colours (docs/hard_canyons.md)
     "hard": CanyonFamily(
-        "hard", 1, HARD_CANYON, appearance="randomized", goal="end", time_limit_s=time_to_end(HARD_CANYON)
+        "hard", 1, HARD_CANYON, look="colours", goal="end", time_limit_s=time_to_end(HARD_CANYON)
     ),
 }
 

@@ -108,6 +108,7 @@ class CanyonEnv(gym.Env):
             self.world.load(generate_canyon(canyon_id, world.canyon), appearance)
             self.canyon_id = canyon_id
         self.world.place(*SPAWN)
+        self.world.start_run(self.np_random)  # a textured look's camera, drawn per run (none otherwise)
         self.time = 0.0
         self.path_length = 0.0
         self.distance = 0.0

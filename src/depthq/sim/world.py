@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from statistics import NormalDist
 
 import mujoco
 import numpy as np
@@ -13,19 +12,23 @@ import numpy as np
 from depthq.configio import OMIT_DEFAULT
 from depthq.errors import ConfigError
 from depthq.sim.camera import OffscreenCamera
+from depthq.sim.camera_model import ImagingConfig, RobotCamera, noise_table
 from depthq.sim.canyon import FAMILIES, PAPER, Canyon, CanyonConfig
+from depthq.sim.look import FLAT, SURFACES, CanyonLook, check_look, draw_canyon_look, is_textured
 from depthq.sim.mjcf import (
     ROBOT_GROUP,
+    VISUAL_GROUP,
     WALL_GROUP,
     WALL_HEIGHT,
+    WALL_SIDES,
     WALL_THICKNESS,
     CameraConfig,
     RobotConfig,
     build_mjcf,
+    wall_ribbon,
 )
 from depthq.sim.sensors import LidarConfig, finish_scan, ray_directions
 
-APPEARANCES = ("default", "randomized")
 NOMINAL_DECISION_HZ = 10.0  # the TurtleBot3 camera's nominal frame rate (docs/design.md#decision-rate)
 DEFAULT_DECISION_HZ = 4.0  # calibrated against Table II's frames per run (docs/calibration.md)
 TURTLEBOT3_MAX_YAW_RATE = 2.84  # rad/s, the Burger's maximum angular velocity
@@ -46,7 +49,13 @@ class WorldConfig:
     # unknown; DEFAULT_DECISION_HZ is calibrated to Table II.
     decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005  # MuJoCo's time step, s; a decision's period is a whole number of them
-    appearance: str = "default"  # the walls' look: default, or randomized per canyon (the hard family's)
+    # How the canyons look (docs/design.md#looks): flat, colours, textured, heldout or a folder of images;
+    # a family's own look is its default (the paper's flat, the hard family's colours).
+    look: str = FLAT
+    # The robot camera's imaging chain (auto-exposure, white balance, vignetting, motion blur, JPEG).
+    imaging: ImagingConfig = field(default_factory=ImagingConfig, metadata=OMIT_DEFAULT)
+    # The sun casts shadows in the textured looks (costly on a software renderer: docs/benchmarks.md).
+    shadows: bool = field(default=False, metadata=OMIT_DEFAULT)
     # The canyon family whose canyons `canyon` generates: paper or hard (`depthq.sim.canyon.FAMILIES`).
     family: str = field(default=PAPER, metadata=OMIT_DEFAULT)
 
@@ -65,10 +74,14 @@ class WorldConfig:
                 f"1/decision_hz must be a multiple of physics_dt ({self.physics_dt} s), got decision_hz "
                 f"{self.decision_hz} (a period of {1 / self.decision_hz:.4f} s)"
             )
-        if self.appearance not in APPEARANCES:
-            raise ConfigError(f"unknown appearance {self.appearance!r}; expected one of {APPEARANCES}")
+        check_look(self.look)
         if self.family not in FAMILIES:
             raise ConfigError(f"unknown canyon family {self.family!r}; expected one of {sorted(FAMILIES)}")
+
+    @property
+    def textured(self) -> bool:
+        """Whether the look draws image textures (and the camera model is on by default)."""
+        return is_textured(self.look)
 
     @property
     def substeps(self) -> int:
@@ -88,19 +101,11 @@ def world_for(world: WorldConfig, family: str) -> WorldConfig:
     if world.family == family:
         return world
     spec = FAMILIES[family]
-    return replace(world, canyon=spec.canyon, appearance=spec.appearance, family=family)
+    return replace(world, canyon=spec.canyon, look=spec.look, family=family)
 
 
-def _noise_table(std_levels: float) -> np.ndarray:
-    """Gaussian pixel noise quantised to grey levels, as a lookup from one random byte.
-
-    Indexing this 256-entry table with uniform random bytes draws from N(0, std²) at the resolution
-    of 1/256 in probability — exact enough for σ ≈ 1.8 levels and ~10× cheaper than normal floats.
-    """
-    if std_levels == 0:
-        return np.zeros(256, np.int16)
-    dist = NormalDist(0.0, std_levels)
-    return np.array([round(dist.inv_cdf((k + 0.5) / 256)) for k in range(256)], np.int16)
+_TEXTURES = tuple(f"tex_{s}" for s in SURFACES)
+_SHELL = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL  # a wall's mesh: its inertia from its surface
 
 
 class CanyonWorld:
@@ -112,7 +117,8 @@ class CanyonWorld:
 
     def __init__(self, config: WorldConfig = WorldConfig(), render: bool = True) -> None:
         self.config = config
-        xml = build_mjcf(config.canyon, config.camera, config.robot, config.lidar, config.physics_dt)
+        xml = build_mjcf(config.canyon, config.camera, config.robot, config.lidar, config.physics_dt,
+                         textured=config.textured, shadows=config.shadows)
         self._spec = mujoco.MjSpec.from_string(xml)
         self._walls = [self._spec.geom(f"wall{i}") for i in range(self._n_walls)]
         self._obstacles = [self._spec.geom(f"obstacle{i}") for i in range(config.canyon.obstacles.count)]
@@ -121,6 +127,8 @@ class CanyonWorld:
         self._default_ground_rgba = np.array(self._spec.geom("ground").rgba)
         self._default_pillar_rgba = np.array(self._obstacles[0].rgba) if self._obstacles else None
         self._default_sun_dir = np.array(self._spec.light("sun").dir)
+        if config.textured:
+            self._visual_pillars = [self._spec.geom(f"obstaclev{i}") for i in range(len(self._obstacles))]
         self.model = self._spec.compile()
         self.data = mujoco.MjData(self.model)
         self._robot_body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "robot")
@@ -132,15 +140,15 @@ class CanyonWorld:
         self.last_raycast = np.full(config.lidar.n_rays, -1.0)  # the noise-free distances of the last scan
         self._geomgroup = np.zeros(6, np.uint8)
         self._geomgroup[WALL_GROUP] = 1
-        self._noise = _noise_table(255.0 * config.camera.noise_std)
+        self._noise = noise_table(255.0 * config.camera.noise_std)
         cam = config.camera
-        # The robot's own body is hidden from its camera, as on the real robot (camera above the chassis).
-        self._eye = (
-            OffscreenCamera(self.model, cam.width, cam.height, hidden_groups=(ROBOT_GROUP,))
-            if render
-            else None
-        )
+        # The robot's own body is hidden from its camera, as on the real robot (camera above the chassis);
+        # in a textured look so are the walls and pillars, whose textured copies it sees instead.
+        hidden, shown = ((ROBOT_GROUP, WALL_GROUP), (VISUAL_GROUP,)) if config.textured else (
+            (ROBOT_GROUP,), ())
+        self._eye = OffscreenCamera(self.model, cam.width, cam.height, hidden, shown) if render else None
         self.canyon: Canyon | None = None
+        self.robot_camera: RobotCamera | None = None  # this run's camera model (`start_run`)
 
     @property
     def _n_walls(self) -> int:
@@ -155,12 +163,27 @@ class CanyonWorld:
         half = np.linalg.norm(b - a, axis=1) / 2
         yaw = np.arctan2(b[:, 1] - a[:, 1], b[:, 0] - a[:, 0])
         mid = (a + b) / 2
-        rgba, pillar_rgba = self._appearance(appearance_rng)
+        textured = self.config.textured
+        if textured:
+            rng = appearance_rng or np.random.default_rng(canyon.id.appearance_seed)
+            look = draw_canyon_look(self.config.look, rng)
+            rgba, pillar_rgba = self._lit(look)
+        else:
+            rgba, pillar_rgba = self._appearance(appearance_rng)
         for k, geom in enumerate(self._walls):
             geom.pos = (mid[k, 0], mid[k, 1], WALL_HEIGHT / 2)
             geom.quat = (math.cos(yaw[k] / 2), 0.0, 0.0, math.sin(yaw[k] / 2))
             geom.size = (half[k], WALL_THICKNESS / 2, WALL_HEIGHT / 2)
             geom.rgba = rgba[k]
+        if textured:  # each side's visual copy: one mesh along the whole wall
+            for side, line in zip(WALL_SIDES, (canyon.left, canyon.right, canyon.back), strict=True):
+                vertices, uv, faces = wall_ribbon(line)
+                # A new mesh each time: MuJoCo 4.0 crashes recompiling a mesh whose vertices were replaced.
+                self._spec.delete(self._spec.mesh(f"wall_{side}"))
+                mesh = self._spec.add_mesh(name=f"wall_{side}", inertia=_SHELL)
+                mesh.uservert = vertices.reshape(-1).tolist()
+                mesh.usertexcoord = uv.reshape(-1).tolist()
+                mesh.userface = faces.reshape(-1).tolist()
         if len(canyon.obstacles) > len(self._obstacles):
             raise ConfigError(
                 f"canyon has {len(canyon.obstacles)} pillars, the world was built for {len(self._obstacles)}"
@@ -169,16 +192,43 @@ class CanyonWorld:
             placed = k < len(canyon.obstacles)
             geom.pos = (*canyon.obstacles[k, :2], geom.pos[2]) if placed else self._parked[k]
             geom.rgba = pillar_rgba
+            if textured:
+                self._visual_pillars[k].pos = geom.pos
         self.model = self._spec.compile()
         self.data = mujoco.MjData(self.model)
         self.canyon = canyon
+        if textured:
+            self._paint(look)
+
+    def _lit(self, look: CanyonLook) -> tuple[np.ndarray, np.ndarray]:
+        """A textured look's sun and sky, set in the spec before it compiles; the (hidden) collision
+        geoms keep the default colours."""
+        sun, sky = self._spec.light("sun"), self._spec.texture("sky")
+        sun.dir, sun.diffuse = look.sun_dir, look.sun_diffuse
+        sky.rgb1, sky.rgb2 = look.sky
+        return np.tile(self._default_wall_rgba, (self._n_walls, 1)), self._default_pillar_rgba
+
+    def _paint(self, look: CanyonLook) -> None:
+        """Write a textured look's pixels into the compiled model and upload them, with the sky and the
+        walls' meshes, to the renderer (its context was made from the first model); set the ambient light."""
+        m = self.model
+        m.vis.headlight.ambient[:] = look.ambient
+        m.vis.headlight.diffuse[:] = 0.1
+        ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TEXTURE, name) for name in ("sky", *_TEXTURES)]
+        for name, tex in zip(SURFACES, ids[1:], strict=True):
+            pixels = look.textures[name]
+            adr = m.tex_adr[tex]
+            m.tex_data[adr : adr + pixels.size] = pixels.reshape(-1)
+        if self._eye is not None:
+            meshes = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_MESH, f"wall_{side}") for side in WALL_SIDES]
+            self._eye.upload(m, ids, meshes)
 
     def _appearance(self, rng: np.random.Generator | None) -> tuple[np.ndarray, np.ndarray]:
         """Wall colours (and, randomised, ground colour and sun direction) for the next canyon."""
         ground, sun = self._spec.geom("ground"), self._spec.light("sun")
         rgba = np.tile(self._default_wall_rgba, (self._n_walls, 1))
         pillar = self._default_pillar_rgba
-        if self.config.appearance == "default" or rng is None:
+        if self.config.look == FLAT or rng is None:
             ground.rgba, sun.dir = self._default_ground_rgba, self._default_sun_dir
             return rgba, pillar
         # Domain randomisation: one colour per wall side, a ground colour and a sun direction per canyon.
@@ -263,11 +313,23 @@ class CanyonWorld:
             raise RuntimeError("this world was built with render=False")
         return self._eye.render(self.model, self.data, "eye")
 
+    def start_run(self, rng: np.random.Generator) -> None:
+        """Draw a run's camera (`depthq.sim.camera_model`) when the look has one; nothing drawn otherwise."""
+        cam, imaging = self.config.camera, self.config.imaging
+        if not imaging.on(self.config.textured):
+            self.robot_camera = None
+            return
+        own = np.random.default_rng(rng.integers(2**63))
+        self.robot_camera = RobotCamera(imaging, cam.width, cam.height, cam.hfov_deg, cam.noise_std, own)
+
     def image(self, rng: np.random.Generator) -> np.ndarray:
-        """The camera frame with Gaussian pixel noise (σ = camera.noise_std of full scale)."""
+        """The camera frame: the render with Gaussian pixel noise (σ = camera.noise_std of full scale),
+        through this run's camera model (`start_run`) when there is one."""
         frame = self.render()
-        noise = self._noise[rng.integers(0, 256, size=frame.shape, dtype=np.uint8)]
-        return np.clip(frame.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+        if self.robot_camera is None:
+            noise = self._noise[rng.integers(0, 256, size=frame.shape, dtype=np.uint8)]
+            return np.clip(frame.astype(np.int16) + noise, 0, 255).astype(np.uint8)
+        return self.robot_camera.take(frame, float(self.data.qvel[2]), rng)
 
     def close(self) -> None:
         if self._eye is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from depthq.configio import OMIT_DEFAULT
+from depthq.configio import OMIT_DEFAULT, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.labels import SampleConfig, check_lookahead
 from depthq.errors import ConfigError
@@ -161,6 +161,7 @@ class TrainConfig:
     precision: str = "fp32"
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
         if self.model not in HEAD_KINDS:
             raise ConfigError(f"train.model must be one of {HEAD_KINDS}, got {self.model!r}")
         # Defaults that depend on other fields are resolved here, so a stored config names its choice.

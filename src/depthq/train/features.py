@@ -9,13 +9,17 @@ Layout, inside the dataset folder:
     DIR/features/<trunk>_<size>/index.json          written last: the cache is complete only when it
                                                    exists and matches (format, trunk, input_size,
                                                    fingerprint, shape, bytes, package version);
-                                                   `host`: the machine and threads that computed it
+                                                   `sha256`: the array's, checked whenever it is
+                                                   read; `host`: the machine and threads that
+                                                   computed it
 
 index.json: `runs` maps a run name (e.g. "train_000012") to [first row, n_frames]; `fingerprint`
 is the SHA-256 of the manifest's (split, index, file sha256) rows, so adding, removing or
 rewriting a run invalidates the cache. A recompute first deletes index.json, writes the array to
 a temporary sibling and renames it into place, then writes index.json: an interrupted
-computation is never read as complete (it starts over on the next call).
+computation is never read as complete (it starts over on the next call, which removes the
+temporary array a killed one left). A cache without `sha256` (an older depthq's) is computed again;
+one whose array does not match it is a DataError (delete the folder to compute it afresh).
 
 float16 keeps the cache at half the size; EfficientNet-Lite0 features are averages of activations
 of magnitude < 10, so rounding errs by at most 2⁻¹¹ relative (< 0.005 absolute).
@@ -35,6 +39,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from depthq.checksum import file_sha256
 from depthq.configio import provenance, read_json, write_json
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import ConfigError, DataError
@@ -45,6 +50,7 @@ from depthq.parallel import cores
 FEATURES = "features"
 ARRAY = "features.f16.npy"
 INDEX = "index.json"
+SHA256 = "sha256"  # index.json's checksum of the array's bytes, checked whenever the cache is read
 FORMAT = "depthq-features"
 FORMAT_VERSION = 1
 BATCH = 128  # frames per decode + trunk batch (the trunk splits it into cache-sized micro-batches)
@@ -112,6 +118,7 @@ def compute_features(
     """Write the cache of `index` into `folder` (see the module docstring); returns frames/s end to end."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / INDEX).unlink(missing_ok=True)  # from here on the folder is incomplete
+    remove_stale(folder)
     n_frames = sum(n for _, n in index["runs"].values())
     tmp = folder / f".{ARRAY}.{os.getpid()}.tmp"
     torch.set_num_threads(trunk_threads())
@@ -139,8 +146,44 @@ def compute_features(
     # The machine and threads that computed them, recorded but not checked: a cache copied from
     # another host is used as it is (its last bits may differ from this host's, docs/design.md#determinism).
     write_json(folder / INDEX, {**index, "host": host_fingerprint(), "bytes": path.stat().st_size,
-                                "seconds": round(seconds, 2)})
+                                SHA256: file_sha256(path), "seconds": round(seconds, 2)})
     return n_frames / seconds
+
+
+def verify_caches(dataset: Dataset) -> list[str]:
+    """One message per feature cache of `dataset` whose array does not match the SHA-256 its index
+    records (`depthq dataset verify`); a stale or unchecked cache is no problem: it is computed again."""
+    problems = []
+    for index_path in sorted((dataset.root / FEATURES).glob(f"*/{INDEX}")):
+        try:
+            recorded = read_json(index_path).get(SHA256)
+        except (DataError, AttributeError) as err:
+            problems.append(f"{index_path}: unreadable ({err}); delete {index_path.parent}")
+            continue
+        array = index_path.parent / ARRAY
+        if recorded is not None and (not array.is_file() or file_sha256(array) != recorded):
+            problems.append(f"{array}: corrupted feature cache (its SHA-256 is not the one {INDEX} "
+                            f"records); delete {index_path.parent}: the next training computes it afresh")
+    return problems
+
+
+def remove_stale(folder: Path) -> None:
+    """Remove the temporary arrays of computations whose process is gone (killed): their PID is in
+    the name, and a live one (another training computing the same cache) is left alone."""
+    for tmp in folder.glob(f".{ARRAY}.*.tmp"):
+        pid = tmp.name.removeprefix(f".{ARRAY}.").removesuffix(".tmp")
+        if not pid.isdigit() or not _alive(int(pid)):
+            tmp.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _index(dataset: Dataset, trunk: str, size: int, mirrored: bool = False) -> dict:
@@ -180,6 +223,11 @@ def _read(folder: Path, expected: dict) -> FeatureTable | None:
         return None
     if features.dtype != np.float16 or list(features.shape) != expected["shape"]:
         return None
+    if SHA256 not in index:
+        return None  # written before the cache had a checksum: computed again
+    if file_sha256(path) != index[SHA256]:
+        raise DataError(f"{path}: corrupted feature cache (its SHA-256 is not the one {INDEX} records); "
+                        f"delete {folder} and run again: the cache is computed afresh")
     runs = {name: (int(first), int(n)) for name, (first, n) in index["runs"].items()}
     return FeatureTable(features, runs, computed=False)
 

@@ -1,6 +1,7 @@
 """A training output folder: what was trained, its weights, its metrics, and how to resume it.
 
-Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename):
+Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename;
+a killed training's temporaries are removed when it resumes):
 
     config.json              what was trained, on which data, for which policy (`depthq.nets.checkpoint`,
                              which owns the format: this file and the weight files, version, digests)
@@ -12,8 +13,10 @@ Layout of OUT/ (every file but the TensorBoard log is written atomically: tempor
     average.safetensors      the mean of the weights after each epoch of the training's last
                              fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
-                             the epochs averaged, their count, the mean's validation loss)
-    metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch)
+                             the epochs averaged, their count, the mean's validation loss), each with
+                             its checksum (`depthq.nets.checkpoint.write_sidecar`)
+    metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch;
+                             the seconds, a timing, are a log: no other file holds one)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
                              ("model.*"), optimizer state ("optim.<param>.<key>"), torch RNG
                              ("rng.torch"), the weight average so far ("average.*"), and in its
@@ -57,6 +60,7 @@ from depthq.nets.checkpoint import (
     stored_parts,
     weights_bytes,
     write_record,
+    write_sidecar,
 )
 from depthq.nets.heads import QNet, build_head
 from depthq.nets.trunk import build_trunk
@@ -152,6 +156,13 @@ def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
     return True
 
 
+def remove_temporaries(out: Path) -> None:
+    """Remove the temporary files (`.NAME.*.tmp`) a killed training left half-written in `out`; its
+    one writer is this process (`depthq.lock` holds the folder for `depthq train`)."""
+    for tmp in out.glob(".*.tmp"):
+        tmp.unlink(missing_ok=True)
+
+
 def record_training(
     out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str, threads: int | None = None
 ) -> None:
@@ -181,11 +192,13 @@ def save_epoch(
     snapshot: bool = False,
     average: AveragedModel | None = None,
     average_loss: tuple[float, float] | None = None,
+    seconds: float | None = None,
 ) -> None:
     """Write the epoch's checkpoint: resume state first (one file), then the weights (`snapshot`:
     also as epoch_NNNN.safetensors; `average`, once it holds an epoch, one per epoch up to this one:
     also average.safetensors, and its validation loss and spread `average_loss` in average.json),
-    metrics and logs."""
+    and metrics.csv, the log of every epoch's metrics and its `seconds` (the one timing written: the
+    other files hold none, so a resumed training writes them byte for byte as an uninterrupted one)."""
     weights = trainable_state(model)
     averaged = int(average.n_averaged) if average is not None else 0
     average_from = state.epoch - averaged + 1  # the average holds every epoch since its first
@@ -211,16 +224,29 @@ def save_epoch(
     also = (["best"] if is_best else []) + ([snapshot_stem(state.epoch)] if snapshot else [])
     for stem in ("last", *also):
         atomic_write_bytes(out / f"{stem}.safetensors", blob)
-        write_json(out / f"{stem}.json", state.history[-1])
+        write_sidecar(out, stem, state.history[-1])
     if averaged:
         atomic_write_bytes(out / "average.safetensors", weights_bytes(mean, {"epoch": str(state.epoch)}))
         val = dict(zip(("val_loss", "val_loss_std"), average_loss, strict=True)) if average_loss else {}
-        write_json(out / "average.json", {"epochs": [average_from, state.epoch], "count": averaged, **val})
+        write_sidecar(out, "average", {"epochs": [average_from, state.epoch], "count": averaged, **val})
+    logged = epoch_seconds(out)
+    if seconds is not None:
+        logged[state.epoch] = seconds
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=METRIC_FIELDS, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(state.history)
+    writer.writerows({**row, "seconds": logged.get(int(row["epoch"]), "")} for row in state.history)
     atomic_write_bytes(out / METRICS, text.getvalue().encode())
+
+
+def epoch_seconds(out: Path) -> dict[int, float]:
+    """epoch → the seconds it took, as metrics.csv logged them (none for an epoch it lacks)."""
+    try:
+        with (out / METRICS).open(newline="") as f:
+            rows = list(csv.DictReader(f))
+        return {int(row["epoch"]): float(row["seconds"]) for row in rows if row.get("seconds")}
+    except (FileNotFoundError, KeyError, ValueError, TypeError):
+        return {}
 
 
 def saved_epoch(out: Path) -> int:

@@ -35,7 +35,14 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, from_dict, provenance, read_json, to_dict, write_json
+from depthq.checksum import read_checked_json, write_checked_json
+from depthq.configio import (
+    atomic_write_bytes,
+    check_seed,
+    from_dict,
+    provenance,
+    to_dict,
+)
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
@@ -127,6 +134,7 @@ class LabellerConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
         if self.method not in METHODS:
@@ -213,7 +221,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
     `device`: see `depthq.nets.device`."""
     out, device = Path(out), resolve_device(device)
     if (out / CONFIG).is_file():
-        if _config_record(read_json(out / CONFIG)) != to_dict(config):
+        if _config_record(read_record(out)) != to_dict(config):
             raise ConfigError(f"--out {out} holds another labeller (config.json differs); use another folder")
         return out
     if out.exists() and any(out.iterdir()):
@@ -243,7 +251,7 @@ def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, dev
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / WEIGHTS, weights_bytes(tensors))
     blocks = np.array_split(np.asarray(losses), min(LOG_BLOCKS, len(losses)))
-    write_json(out / CONFIG, {
+    write_checked_json(out / CONFIG, {
         "format": FORMAT, "format_version": FORMAT_VERSION, "provenance": provenance(),
         "config": to_dict(config), "name": config.method, **identity, "n_bins": BinConfig(**bins).n_bins,
         "fingerprint": _fingerprint(identity, read_weights(out / WEIGHTS)[1][DIGEST]),
@@ -287,6 +295,12 @@ def _config_record(record: dict[str, Any]) -> dict[str, Any]:
     return to_dict(from_dict(LabellerConfig, config))
 
 
+def read_record(folder: Path) -> dict[str, Any]:
+    """A labeller folder's config.json, its checksum checked (`depthq.checksum`)."""
+    return read_checked_json(Path(folder) / CONFIG, "restore the labeller folder from a copy, or train it "
+                             "again (a config is never edited by hand)")
+
+
 def load_labeller(folder: Path) -> Labeller:
     """The labeller in `folder`; a missing or foreign folder, or weights that fail their SHA-256, is an
     error naming the file."""
@@ -295,7 +309,7 @@ def load_labeller(folder: Path) -> Labeller:
     if not path.is_file():
         raise ConfigError(f"--labeller {folder}: not a labeller folder (no {CONFIG}; make one with "
                           "`depthq labeller --data DATASET --out FOLDER`)")
-    record = read_json(path)
+    record = read_record(folder)
     if not isinstance(record, dict) or record.get("format") != FORMAT:
         raise ConfigError(f"{path}: not a {FORMAT} config")
     if record.get("format_version") != FORMAT_VERSION:

@@ -61,6 +61,7 @@ def train(
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
     out.mkdir(parents=True, exist_ok=True)
+    folder.remove_temporaries(out)
     torch.set_num_threads(threads or cores())
     folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads())
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
@@ -106,7 +107,6 @@ def train(
                 "train_loss": float(np.mean(train_losses)),
                 "val_loss": val_loss,
                 "val_loss_std": val_loss_std,  # the paper's over-fitting signal (Fig. 5)
-                "seconds": round(time.perf_counter() - start, 3),
             }
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
@@ -116,7 +116,7 @@ def train(
                 average.update_parameters(model)
                 average_loss = validate(average.module, val_set, val_batches, loss_fn, target_head, config)
             folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
-                              average, average_loss)
+                              average, average_loss, seconds=round(time.perf_counter() - start, 3))
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")

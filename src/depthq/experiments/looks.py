@@ -1,0 +1,208 @@
+"""Looks (docs/design.md#looks): the same pose in every look, and which value signal transfers across
+looks (issue #45 item 3).
+
+    python -m depthq.experiments.looks figure [DOCS]          # DOCS/looks.png (default docs/)
+    python -m depthq.experiments.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
+    python -m depthq.experiments.looks table OUT [--runs 500] [--seeds 0-2]
+
+`run` (resumed: every step is skipped when its output is complete), per training look L (default
+colours, textured), hard canyons:
+
+    OUT/<L>/sweep/             `depthq sweep --preset hard --look L --runs N --sizes N --seeds S
+                               --canyons <choose>`: the data in look L, the Depth-Q-Nets (LiDAR labels)
+                               and Coll-Q-Nets, evaluated in look L in the choice canyons
+    OUT/<L>/camera/            `python -m depthq.experiments.camera_labels run` on it (--method
+                               monodepth): the labeller, its labels' error, the camera-label Depth-Q-Nets
+    OUT/<L>/eval_<D>/<net>_s<S>/  every net (depth, camera, coll) driven in look D (default colours,
+                               textured, heldout) in `--canyons`
+
+`table` prints, per net and training look, the distance to the first collision (mean [95 %
+interval] over seeds) in each driving look, and each look's share of the training look's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.experiments import camera_labels
+from depthq.experiments.cells import evaluation_summary, mean_interval
+from depthq.experiments.cli import guarded
+from depthq.nets.checkpoint import CONFIG
+from depthq.pipeline.layout import model_name
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.sweep import parse_ints, retarget, widened
+from depthq.report.reproduce import run_sweep
+from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
+from depthq.sim.world import WorldConfig, world_for
+
+PROG = "python -m depthq.experiments.looks"
+CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
+POSE_STEPS = 8  # straight ahead for this many decisions, then one turning step (blur in the textured looks)
+TRAIN_LOOKS = (COLOURS, TEXTURED)
+DRIVE_LOOKS = (COLOURS, TEXTURED, HELDOUT)
+CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment make their choices
+NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
+
+
+def frames(canyon: str = CANYON, looks: tuple[str, ...] = LOOKS) -> dict[str, np.ndarray]:
+    """Each look's camera frame after the same drive (seed 0) into `canyon`."""
+    out = {}
+    for look in looks:
+        family = "hard" if canyon.startswith("hard/") else "paper"
+        world = replace(world_for(WorldConfig(), family), look=look)
+        env = CanyonEnv(EnvConfig(world=world))
+        try:
+            obs, _ = env.reset(seed=0, options={"canyon": canyon})
+            for action in [0.0] * POSE_STEPS + [0.8]:
+                obs, *_ = env.step(np.array([action], np.float32))
+            out[look] = obs["image"].copy()
+        finally:
+            env.close()
+    return out
+
+
+def figure(path: Path, canyon: str = CANYON) -> None:
+    """A 2 × 2 grid of the looks' frames, each labelled, as a PNG."""
+    tiles = []
+    for look, image in frames(canyon).items():
+        tile = Image.fromarray(image)
+        ImageDraw.Draw(tile).text((8, 6), look, fill=(255, 255, 255))
+        tiles.append(np.asarray(tile))
+    half = (len(tiles) + 1) // 2
+    grid = np.concatenate([np.concatenate(tiles[:half], 1), np.concatenate(tiles[half:], 1)], 0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(grid).save(path)
+
+
+def checkpoints(out: Path, look: str, runs: int, seed: int, method: str) -> dict[str, Path]:
+    """The nets trained in `look`: the sweep's Depth-Q-Net and Coll-Q-Net, the camera-label Depth-Q-Net."""
+    name = model_name("depth", runs, seed)
+    return {"depth": out / look / "sweep" / "models" / name,
+            "camera": out / look / "camera" / method / "models" / name,
+            "coll": out / look / "sweep" / "models" / model_name("coll", runs, seed)}
+
+
+def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+        canyons: str = "hard/eval", choose: str = CHOOSE, train_looks: tuple[str, ...] = TRAIN_LOOKS,
+        drive_looks: tuple[str, ...] = DRIVE_LOOKS, method: str = "monodepth",
+        time_limit_s: float | None = None,
+        labeller_settings: tuple[tuple[str, Any], ...] = (), training: tuple[tuple[str, Any], ...] = (),
+        workers: int = 2, device: str = "auto", progress: bool = True) -> int:
+    """The experiment into OUT (resumed); then its table."""
+    out = Path(out).resolve()
+    for look in (*train_looks, *drive_looks):
+        check_look(look)
+    driving = EvalConfig(canyons=parse_canyon_set(canyons), time_limit_s=time_limit_s)  # checked up front
+    for look in train_looks:
+        sweep = retarget(get_preset(preset), family="hard", canyons=choose, look=look)
+        if time_limit_s is not None:
+            limit = {**dict(sweep.evaluate), "time_limit_s": time_limit_s}
+            sweep = replace(sweep, evaluate=tuple(limit.items()))
+        sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset} in the {look} look",
+                        train=tuple({**dict(sweep.train), **dict(training)}.items()))
+        print(f"sweep in the {look} look → {out / look / 'sweep'}", flush=True)
+        run_sweep(sweep, out / look / "sweep", progress=progress, device=device)
+        camera_labels.run(out / look / "sweep", out / look / "camera", method, runs=runs, seeds=seeds,
+                          canyons=choose, time_limit_s=time_limit_s, look=look,
+                          labeller_settings=labeller_settings, training=training, workers=workers,
+                          device=device, progress=progress)
+        for drive in drive_looks:
+            config = replace(driving, look=drive)
+            for seed in seeds:
+                for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
+                    folder = out / look / f"eval_{drive}" / f"{net}_s{seed}"
+                    if (folder / "summary.json").is_file() or not (checkpoint / CONFIG).is_file():
+                        continue
+                    print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
+                    evaluate(str(checkpoint), folder, config, workers=workers, progress=progress,
+                             device=device, video=False)
+    print(table(out, runs, seeds, train_looks, drive_looks))
+    return 0
+
+
+def table(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+          train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS) -> str:
+    """Markdown: per net and training look, the distance to the first collision in each driving look
+    (mean [95 % interval] over seeds, ends reached in all), and each driving look's mean as a share
+    of the training look's own."""
+    head = ["Q-net", "trained in", *(f"driven in {d}: m (ends)" for d in drive_looks),
+            *(f"{d} / own" for d in drive_looks)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for net, label in NETS.items():
+        for look in train_looks:
+            means, cells = {}, []
+            for drive in drive_looks:
+                found = [s for seed in seeds
+                         if (s := evaluation_summary(Path(out) / look / f"eval_{drive}" / f"{net}_s{seed}"))]
+                values = [s["distance_to_collision_mean"] for s in found]
+                means[drive] = float(np.mean(values)) if values else None
+                ends = sum(int(s["successes"]) for s in found)
+                cells.append(f"{mean_interval(values, '.2f', len(seeds))} ({ends})" if values else "–")
+            own = means.get(look)
+            shares = [f"{means[d] / own:.0%}" if own and means[d] is not None else "–" for d in drive_looks]
+            lines.append("| " + " | ".join([label, look, *cells, *shares]) + " |")
+    return "\n".join(lines)
+
+
+def _looks(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(","))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
+    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    fig = actions.add_parser("figure", help="the same pose in every look: DOCS/looks.png")
+    fig.add_argument("docs", nargs="?", type=Path, default=Path("docs"), help="folder of looks.png")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("out", type=Path, help="the experiment's folder (created; resumed)")
+    common.add_argument("--runs", type=int, default=500, help="training runs of every Q-net (default: 500)")
+    common.add_argument("--seeds", default="0-2", help="training seeds (default: 0-2)")
+    common.add_argument("--train-looks", default=",".join(TRAIN_LOOKS), help="looks the nets learn in")
+    common.add_argument("--drive-looks", default=",".join(DRIVE_LOOKS), help="looks every net drives in")
+    go = actions.add_parser("run", parents=[common], help="sweeps, camera labels, evaluations (resumed)")
+    go.add_argument("--preset", default="hard", help="the sweep preset the training follows (default: hard)")
+    go.add_argument("--canyons", default="hard/eval", help="the canyons of the table (default: hard/eval)")
+    go.add_argument("--choose", default=CHOOSE, help=f"the canyons of every choice (default: {CHOOSE})")
+    go.add_argument("--method", default="monodepth", help="the camera labeller (default: monodepth)")
+    go.add_argument("--time-limit", type=float, default=None, help="seconds per evaluation run")
+    go.add_argument("--labeller-set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a LabellerConfig setting, as camera_labels takes it; repeatable")
+    go.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a training setting of every Q-net, one value; repeatable")
+    go.add_argument("--workers", type=int, default=2, help="processes per evaluation (default: 2)")
+    go.add_argument("--device", default="auto", help="torch device (default: auto)")
+    go.add_argument("--no-progress", action="store_true", help="no progress bars")
+    actions.add_parser("table", parents=[common], help="the Markdown table of what OUT holds")
+    args = parser.parse_args(argv)
+
+    def work() -> int:
+        if args.action == "figure":
+            figure(args.docs / "looks.png")
+            print(f"wrote {args.docs / 'looks.png'}")
+            return 0
+        seeds = parse_ints(args.seeds, "--seeds")
+        train_looks, drive_looks = _looks(args.train_looks), _looks(args.drive_looks)
+        if args.action == "table":
+            print(table(args.out, args.runs, seeds, train_looks, drive_looks))
+            return 0
+        return run(args.out, preset=args.preset, runs=args.runs, seeds=seeds, canyons=args.canyons,
+                   choose=args.choose, train_looks=train_looks, drive_looks=drive_looks, method=args.method,
+                   time_limit_s=args.time_limit,
+                   labeller_settings=camera_labels.parse_settings(args.labeller_set, "--labeller-set"),
+                   training=camera_labels.parse_settings(args.set, "--set"), workers=args.workers,
+                   device=args.device, progress=not args.no_progress)
+
+    return guarded(PROG, work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
