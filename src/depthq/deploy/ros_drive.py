@@ -17,6 +17,7 @@ from depthq.deploy.robot import Command, DriverConfig, Frame, RobotDriver, robot
 from depthq.deploy.ros1 import import_rospy, require_master
 
 BUFFER_BYTES = 1 << 24  # rospy's receive buffer: larger than any frame, or it delivers stale ones
+CLOCKS_APART_S = 10.0  # a frame this far from the node's clock: not a late frame but another clock
 
 
 @dataclass(frozen=True)
@@ -67,7 +68,13 @@ def run_drive_node(
         stamp = msg.header.stamp.to_sec()
         frame = (Frame(stamp, bytes(msg.data)) if compressed
                  else Frame(stamp, bytes(msg.data), msg.encoding, msg.height, msg.width, msg.step))
-        core.on_frame(frame, rospy.get_time())
+        now = rospy.get_time()
+        core.on_frame(frame, now)
+        if abs(now - stamp) > CLOCKS_APART_S:
+            rospy.logwarn_throttle(
+                5.0, f"frames are stamped {now - stamp:.0f} s away from this node's clock, all stale: the "
+                "camera's and this node's clocks differ (under depthq ros sim, start this node after the "
+                "sim is ready, or `rosparam set /use_sim_time true` before either)")
 
     def on_tick(_event) -> None:
         with lock:
