@@ -342,3 +342,16 @@ def test_invalid_readings_read_as_the_lds01_reports_them() -> None:
     assert np.array_equal(rays[:8], np.array([0, 0, 0, 0, 0.12, 3.5, np.inf, np.inf], np.float32))
     assert (rays[8:] == 2.0).all()
     assert np.array_equal(rosbag._scan_to_rays(_laser(0.0, 1.0, np.zeros(0))), np.zeros(360, np.float32))
+
+
+def test_commands_logged_in_one_clock_tick_import_the_later_one(tmp_path: Path) -> None:
+    """A Twist's stamp is when the recorder logged it; on a simulated /clock two commands can share one
+    tick (a decision and the shutdown's zero twist in `depthq ros sim`'s 5 ms ticks). Equal log times
+    are not out of order: the later message is the command in force. Decreasing ones still are."""
+    frames = [250 * i for i in range(30)]
+    cmds = [(t + 30, 0.5, 0.0) for t in frames]
+    cmds.insert(11, (frames[10] + 30, 0.5, 0.7))  # logged in the same tick as frame 10's command, after it
+    bag = write_bag(tmp_path / "ties", frames, cmds)
+    dataset = rosbag.import_bag(bag, tmp_path / "data", rosbag.ImportConfig(val_runs=0), progress=False)
+    actions = dataset.read_run(dataset.entries()[0]).actions
+    assert actions[10] == pytest.approx(0.7) and actions[9] == 0 and actions[11] == 0

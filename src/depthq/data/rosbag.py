@@ -383,9 +383,11 @@ def _messages(rec: _Bag, conns: list[Any]) -> Iterator[tuple[int, Any]]:
         ) from err
 
 
-def _monotonic(bag: Path, topic: str, ns: list[int]) -> np.ndarray:
+def _monotonic(bag: Path, topic: str, ns: list[int], ties: bool = False) -> np.ndarray:
+    """The stamps, checked to increase; `ties`: equal stamps allowed (log times of messages received
+    within one tick of a simulated /clock), the later message then the one in force."""
     stamps = np.asarray(ns, dtype=np.int64)
-    bad = np.flatnonzero(np.diff(stamps) <= 0)
+    bad = np.flatnonzero(np.diff(stamps) < 0 if ties else np.diff(stamps) <= 0)
     if bad.size:
         i = int(bad[0]) + 1
         raise DataError(
@@ -402,10 +404,11 @@ def _read_streams(rec: _Bag, conns: dict[str, list[Any]]) -> _Streams:
         for _, m in _messages(rec, conns["scan"]):
             scan_ns.append(_stamp_ns(m.header))
             scans.append(_scan_to_rays(m))
-    cmd_ns, cmds = [], []
+    cmd_ns, cmds, logged = [], [], False
     for log_ns, m in _messages(rec, conns["cmd"]):
         twist = m.twist if hasattr(m, "twist") else m
         cmd_ns.append(_stamp_ns(m.header) if hasattr(m, "header") else log_ns)
+        logged = logged or not hasattr(m, "header")  # a Twist's stamp: when the recorder logged it
         cmds.append((twist.linear.x, twist.angular.z))
     odom_ns, poses = [], []
     if "odom" in conns:
@@ -422,7 +425,7 @@ def _read_streams(rec: _Bag, conns: dict[str, list[Any]]) -> _Streams:
         if name in conns and not stamps:
             raise DataError(f"{rec.path}: topic {topic[name]} has no messages")
     frames = _monotonic(rec.path, topic["image"], frame_ns)
-    commands = _monotonic(rec.path, topic["cmd"], cmd_ns)
+    commands = _monotonic(rec.path, topic["cmd"], cmd_ns, ties=logged)
     cmds = np.asarray(cmds, np.float64)
     return _Streams(
         frame_ns=frames,

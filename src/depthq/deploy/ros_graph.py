@@ -25,7 +25,7 @@ class RosGraph:
     """roscore and its processes; logs in `folder` (NAME.log), ROS's own files in `folder`/ros."""
 
     def __init__(self, folder: Path, timeout_s: float = 30.0) -> None:
-        self.folder = Path(folder)
+        self.folder = Path(folder).absolute()  # its processes run in it: ROS_HOME must not be relative
         self.folder.mkdir(parents=True, exist_ok=True)
         with socket.socket() as s:
             s.bind(("localhost", 0))
@@ -90,21 +90,37 @@ class RosGraph:
         return self.log(name)
 
     def stop(self, name: str, grace: float = 10.0) -> None:
-        """SIGINT to process `name`'s group, SIGKILL if it has not ended after `grace` s."""
+        """SIGINT to process `name`'s group, SIGKILL if it has not ended after `grace` s. Returns once the
+        whole group has ended: a child may outlive its parent (`rosbag record`'s recorder, which renames
+        its .bag.active when it has closed the file)."""
         proc = self.procs[name]
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGINT)
-            try:
-                proc.wait(timeout=grace)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
+        deadline = time.monotonic() + grace
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            proc.poll()  # reap the leader, so that only live members keep the group
+            time.sleep(0.05)
+        if _group_alive(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
 
     def close(self) -> None:
         for name in reversed(list(self.procs)):  # roscore, started first, stopped last
             self.stop(name)
         if self.master_up():
             raise RuntimeError(f"a ROS master still answers on port {self.port}")
+
+
+def _group_alive(pgid: int) -> bool:
+    """Whether a process of group `pgid` still runs (a zombie, ended but not yet reaped, does not)."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()  # after "pid (comm)": state, ppid, pgrp
+        except OSError:
+            continue  # ended while we looked
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            return True
+    return False
 
 
 def _sigint() -> None:
