@@ -313,3 +313,20 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
         graph.stop("drive2")
         assert "watchdog: zero twist" in graph.log("drive2")
     assert not graph.master_up() and all(p.poll() is not None for p in graph.procs.values())  # nothing left
+
+
+def test_the_paired_table_pools_measurements(tmp_path: Path) -> None:
+    """ros_fidelity --paired: a row per finished measurement and one pooled, the paired interval."""
+    from depthq.configio import write_json
+    from depthq.experiments.ros_fidelity import main as fidelity
+    from depthq.experiments.ros_fidelity import paired
+
+    def row(ros: float, ev: float) -> dict:
+        return {"ros": ros, "evaluate": ev, "ros_end": "bump", "evaluate_end": "end" if ev > 20 else "bump"}
+
+    write_json(tmp_path / "a" / "ros_fidelity.json", {"rows": [row(10.0, 12.0), row(14.0, 21.0)]})
+    write_json(tmp_path / "b" / "ros_fidelity.json", {"rows": [row(20.0, 18.0)]})
+    table = paired([tmp_path / "a", tmp_path / "b"]).splitlines()
+    assert len(table) == 5 and table[-1].startswith("| all | 3 | 17.00 m | 14.67 m | 86% | -2.33 [")
+    assert "| 1 / 0 |" in table[2]
+    assert fidelity(["--paired", str(tmp_path / "a")]) == 0

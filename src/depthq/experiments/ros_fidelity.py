@@ -15,6 +15,12 @@ measures where a difference comes from, without ROS and its timing: the same nod
 (`RobotDriver`) and simulated robot (`CanyonRobot`) in lock-step on the simulated clock, the command
 applied `latency` seconds after its decision, the frames given as JPEG (as through ROS) or raw (as
 in the evaluation), with several sensor-noise seeds: one row per (latency, frames) setting.
+
+    python -m depthq.experiments.ros_fidelity --paired runs/ros-fidelity3 runs/ros-fidelity-s3-8
+
+reads finished measurements and prints docs/robot.md's table: per folder and all pooled, the mean
+distances, their ratio, the paired difference (ROS − evaluate per canyon and seed) with its 95 %
+interval, and the ends reached.
 """
 
 from __future__ import annotations
@@ -27,11 +33,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from depthq.configio import write_json
+from depthq.configio import read_json, write_json
 from depthq.deploy.canyon_robot import CanyonRobot, RobotSimConfig
 from depthq.deploy.robot import DriverConfig, Frame, RobotDriver, robot_policy
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.experiments.cells import mean_interval
 
 
 def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float, seed: int = 0) -> dict[str, Any]:
@@ -97,13 +104,29 @@ def replica(
     return result
 
 
+def paired(folders: list[Path]) -> str:
+    """docs/robot.md's table of finished measurements (`ros_fidelity.json` in each folder): a row per
+    folder, then one of all their runs pooled."""
+    groups = [(str(f), read_json(Path(f) / "ros_fidelity.json")["rows"]) for f in folders]
+    lines = ["| runs | n | `depthq evaluate` | through ROS | ROS / evaluate | paired (m) | ends, evaluate "
+             "/ ROS |", "|---|---|---|---|---|---|---|"]
+    pooled = [r for _, group in groups for r in group]
+    for name, rows in [*groups, ("all", pooled)]:
+        ros, ev = statistics.mean(r["ros"] for r in rows), statistics.mean(r["evaluate"] for r in rows)
+        ends = [sum(r[f"{side}_end"] == "end" for r in rows) for side in ("evaluate", "ros")]
+        diff = mean_interval([r["ros"] - r["evaluate"] for r in rows], "+.2f")
+        lines.append(f"| {name} | {len(rows)} | {ev:.2f} m | {ros:.2f} m | {ros / ev:.0%} | {diff} | "
+                     f"{ends[0]} / {ends[1]} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m depthq.experiments.ros_fidelity",
                                      description=__doc__.splitlines()[0])
-    parser.add_argument("checkpoint", type=Path)
+    parser.add_argument("checkpoint", type=Path, nargs="?")
     parser.add_argument("--canyons", default="hard/eval:0-4", help="a canyon set, as evaluate's")
     parser.add_argument("--camera-hz", type=float, default=30.0)
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--out", type=Path)
     parser.add_argument("--replica", action="store_true", help="the ROS-free replica's settings instead")
     parser.add_argument("--settings", default="0:raw,0:jpeg,0.06:jpeg",
                         help="the replica's LATENCY_S:raw|jpeg settings, comma-separated [%(default)s]")
@@ -111,7 +134,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="the replica's bump checks per second [the evaluation's: the decision rate]")
     parser.add_argument("--seeds", default="0",
                         help="sensor-noise seeds, e.g. 0,1,2: one run per canyon and seed on each side")
+    parser.add_argument("--paired", type=Path, nargs="+", metavar="FOLDER",
+                        help="print the paired table of finished measurements (their --out folders) and stop")
     args = parser.parse_args(argv)
+    if args.paired:
+        print(paired(args.paired))
+        return 0
+    if args.checkpoint is None or args.out is None:
+        parser.error("a CHECKPOINT and --out are needed to measure (or --paired FOLDER … to read)")
     # Ctrl-C and kill end the runs through RosGraph's cleanup, even in a script's background
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
