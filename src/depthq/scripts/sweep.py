@@ -19,7 +19,7 @@ _HELP = {
     "500 --sizes 200,500 trains the models the preset's 900 runs would",
     "env.world.decision_hz": "the evaluations' rate too",
     "env.world.family": "the evaluation canyons become the family's eval canyons",
-    "env.world.look": "the evaluations' look too (default: the family's own)",
+    "env.world.look": "the evaluations' look too",
 }
 
 
