@@ -19,8 +19,7 @@ from depthq.data.runfile import JPEG_QUALITY, encode_jpeg
 from depthq.deploy.robot import STOP, Twist
 from depthq.errors import ConfigError
 from depthq.sim.canyon import FAMILIES
-from depthq.sim.env import SPAWN, CanyonEnv, EnvConfig, parse_canyon
-from depthq.sim.sensors import bump
+from depthq.sim.env import SPAWN, CanyonEnv, EnvConfig, end_reason, parse_canyon
 from depthq.sim.world import WorldConfig, world_for
 
 LDS01_HZ = 5.0  # the TurtleBot3 LiDAR's scans per second
@@ -166,18 +165,12 @@ class CanyonRobot:
             jpeg = encode_jpeg(image, self.config.jpeg_quality)
             self.frames += 1
             self.last_frame = self.driven if self.start is not None else None
-        reason = "contact" if contact else None
         if self._due(LDS01_HZ):
             scan = self._scan()
+        reading = None  # the scan the bump is checked on, when a check is due
         if self.start is not None and self._due_driving(self.bump_hz):
-            env = self.env.config
             reading = scan if scan is not None else self._scan()
-            if reason is None and self.driven >= env.bump.grace_s - 1e-9 and bump(reading, env.bump):
-                reason = "bump"
-        if reason is None and self.progress >= canyon.length:
-            reason = "end"
-        if reason is None and self.driven >= self.env.config.time_limit_s - 1e-9:
-            reason = "time_limit"
+        reason = end_reason(self.env.config, self.driven, contact, reading, self.progress, canyon.length)
         self.end_reason = reason
         if reason is not None:
             self.command = STOP

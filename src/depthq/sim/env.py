@@ -58,6 +58,23 @@ def parse_canyon(value: Any) -> CanyonId:
     raise ConfigError(f"canyon must be 'stream:index' or (stream, index), got {value!r}")
 
 
+def end_reason(
+    config: EnvConfig, time: float, contact: bool, scan: np.ndarray | None, progress: float, length: float
+) -> str | None:
+    """Why a run ends after a step at `time` s of driving, the first that holds of: a contact, a bump
+    (on `scan`, after the grace; None: no scan checked this step), the canyon's end reached (`progress`
+    along its `length`), the time limit; None: the run goes on. `depthq ros sim`'s robot ends by it too."""
+    if contact:
+        return "contact"
+    if scan is not None and time >= config.bump.grace_s - 1e-9 and bump(scan, config.bump):
+        return "bump"
+    if progress >= length:
+        return "end"
+    if time >= config.time_limit_s - 1e-9:
+        return "time_limit"
+    return None
+
+
 class CanyonEnv(gym.Env):
     """A TurtleBot3 Burger in a random canyon, seen through its camera and LiDAR."""
 
@@ -138,15 +155,7 @@ class CanyonEnv(gym.Env):
         progress = canyon.progress(pose[:2])
         self.progress = max(self.progress, progress)
         self._obs = self._observe()
-        reason = None
-        if contact:
-            reason = "contact"
-        elif self.time >= self.config.bump.grace_s - 1e-9 and bump(self._obs["scan"], self.config.bump):
-            reason = "bump"
-        elif progress >= canyon.length:
-            reason = "end"
-        elif self.time >= self.config.time_limit_s - 1e-9:
-            reason = "time_limit"
+        reason = end_reason(self.config, self.time, contact, self._obs["scan"], progress, canyon.length)
         terminated = reason in (*COLLISIONS, "end")
         return self._obs, gained, terminated, reason == "time_limit", self._info(reason)
 
