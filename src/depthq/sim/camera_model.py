@@ -19,6 +19,7 @@ from statistics import NormalDist
 
 import numpy as np
 from PIL import Image
+from scipy import ndimage
 
 from depthq.errors import ConfigError
 
@@ -96,7 +97,6 @@ class RobotCamera:
         self.vignette = np.repeat((1 - u(config.vignetting) * r2)[..., None], 3, axis=2).astype(np.float32)
         self._rng = rng
         self._width = width
-        self._pad = np.empty((height, width + _MAX_BLUR_PX, 3), np.float32)
         self._x = np.empty((height, width, 3), np.float32)
         self._noise = np.empty((height, width, 3), np.int16)
         self._out = np.empty((height, width, 3), np.uint8)
@@ -111,18 +111,12 @@ class RobotCamera:
         x, w = self._x, self._width
         n = min(round(self.blur_px(yaw_rate)), _MAX_BLUR_PX)
         if n >= 2:  # a box blur along the rows: the scene sweeps sideways across the sensor while turning
-            pad, left = self._pad, n // 2
-            pad[:, left : left + w] = frame
-            pad[:, :left] = frame[:, :1]
-            pad[:, left + w : w + n - 1] = frame[:, -1:]
-            np.copyto(x, pad[:, :w])
-            for k in range(1, n):
-                x += pad[:, k : k + w]
+            ndimage.uniform_filter1d(frame, n, axis=1, output=x, mode="nearest")
         else:
             np.copyto(x, frame)
         x *= self.vignette
         rows = x.reshape(x.shape[0], -1)
-        rows *= np.tile((self.gain * self.wb / max(n, 1)).astype(np.float32), w)
+        rows *= np.tile((self.gain * self.wb).astype(np.float32), w)
         level = float(x[::8, ::8].mean()) / 255  # metering for the next frame
         if level > 0:
             step = self.rate * math.log(self.target / level)
