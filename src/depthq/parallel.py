@@ -12,9 +12,11 @@ policy). It takes a picklable `make_worker()` that builds that state and returns
 - `ray`: `workers` Ray actors of one CPU each, on the cluster at `address` (None: a Ray started on
   this machine); an actor whose node dies is restarted elsewhere and its task retried.
 
-`Executor.run_jobs`: a pipeline's steps (`Job`s: collect, train a model, evaluate it). Locally
-they run here one after the other; on Ray, each `remote` job is a Ray task declaring its CPUs
-(and GPU), started once the jobs it reads from are done, retried on another node if its node dies.
+`Executor.run_jobs`: a pipeline's steps (`Job`s: collect, train a model, evaluate it). Locally,
+each `remote` job runs in a process of its own pinned to one free core, started once the jobs it
+reads from are done (one job per core: a training and an evaluation overlap on 2 cores), and the
+others here, one after the other; on Ray, each `remote` job is a Ray task declaring its CPUs (and
+GPU), started once the jobs it reads from are done, retried on another node if its node dies.
 
 A task's result depends on the task alone (each carries its own seeds, and a job its own thread
 count), so the results are the same whatever the executor and the number of workers or nodes.
@@ -93,7 +95,7 @@ class Executor:
         name and measured seconds as it finishes."""
         if self.kind == "ray":
             return _run_jobs_ray(jobs, self.address)
-        return ((job.name, _timed(job.run)) for job in jobs)
+        return _run_jobs_local(jobs)
 
     def check_shared(self, folder: Path) -> None:
         """Fail with a clear message unless every node of the cluster sees and can write `folder`
@@ -306,6 +308,63 @@ def _run_jobs_ray(jobs: Sequence[Job], address: str | None) -> Iterator[tuple[st
         pending[refs[job.name]] = job.name
         yield from finished(wait_all=False)
     yield from finished(wait_all=True)
+
+
+def _on_core(core: int, name: str, run: Callable[[], object], results) -> None:
+    """A local job's process: pinned to `core`, it runs the job and sends back its seconds or its error."""
+    os.sched_setaffinity(0, {core})
+    try:
+        results.put((name, True, _timed(run)))
+    except Exception as err:
+        results.put((name, False, (_portable(err), traceback.format_exc())))
+
+
+def _run_jobs_local(jobs: Sequence[Job]) -> Iterator[tuple[str, float]]:
+    """Each remote job in a process on a free core of this process's own, once its inputs are done;
+    every other job here, once all before it are done (`Executor.run_jobs`)."""
+    ctx = worker_context()
+    results = ctx.Queue()
+    free = sorted(os.sched_getaffinity(0))
+    todo, waiting = list(jobs), []
+    running: dict[str, tuple[Any, int]] = {}  # job name → (its process, its core)
+    done: set[str] = set()
+    names = {job.name for job in jobs}  # an input not among them was done before this call
+
+    def finish_one() -> tuple[str, float]:
+        name, ok, value = _next(results, [p for p, _ in running.values()], "pipeline job")
+        process, core = running.pop(name)
+        process.join()
+        free.append(core)
+        if not ok:
+            error, text = value
+            raise WorkerError(f"job {name!r} failed:\n{text}", error) from error
+        done.add(name)
+        return name, value
+
+    try:
+        while todo or waiting or running:
+            while todo and todo[0].remote:  # up to the next job that runs here
+                waiting.append(todo.pop(0))
+            for job in [w for w in waiting if all(a in done or a not in names for a in w.after)]:
+                if not free:
+                    break
+                waiting.remove(job)
+                core = free.pop(0)
+                process = ctx.Process(target=_on_core, args=(core, job.name, job.run, results))
+                process.start()
+                running[job.name] = (process, core)
+            if running:
+                yield finish_one()
+            elif waiting:
+                raise WorkerError(f"jobs wait on inputs that never ran: {[w.name for w in waiting]}")
+            elif todo:
+                job = todo.pop(0)
+                yield job.name, _timed(job.run)
+                done.add(job.name)
+    finally:
+        for process, _ in running.values():
+            process.terminate()
+            process.join()
 
 
 def _probe_shared(token: str, node: str) -> str:

@@ -35,7 +35,7 @@ from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.trunk import TRUNKS
-from depthq.parallel import LOCAL, Executor, Job, cores
+from depthq.parallel import LOCAL, Executor, Job
 from depthq.pipeline.sweep import SETUP_DEFAULTS, Sweep
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
@@ -110,27 +110,24 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
         folder = out / "eval" / ref
         drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
         stages.append(Stage(partial(_eval_done, folder), Job(f"evaluate {ref}", drive)))
-    # On Ray a training reserves as many CPUs as it uses threads: this machine's count, whichever
-    # node runs it, because a different count sums floats in another order (other bytes).
-    remote, threads = executor.kind == "ray", cores()
+    # Every model's training and evaluation is a job of one core (a process of its own, locally one
+    # per free core: docs/design.md#overlap): a training on one thread, so its bytes depend on no
+    # machine's core count (torch sums floats in an order that depends on the thread count), and an
+    # evaluation in one worker, its canyons in lock-step.
     gpus = 1.0 if device.startswith("cuda") else 0.0
     for model in models:
         config, ckpt, ev = configs[model], out / "models" / model.name, out / "eval" / model.name
-        fit = partial(train, config, ckpt, progress=not remote, device=device, threads=threads)
-        # On Ray an evaluation is one task of `workers` CPUs that drives its canyons in as many local
-        # processes: every model job then takes the CPUs a training takes, and none is left idle.
-        drive = partial(
-            evaluate, str(ckpt), ev, eval_config, sweep.workers, progress=not remote, device=device,
-            video=False, executor=LOCAL,
-        )
+        fit = partial(train, config, ckpt, progress=False, device=device, threads=1)
+        drive = partial(evaluate, str(ckpt), ev, eval_config, 1, progress=False, device=device, video=False,
+                        executor=LOCAL)
         stages += [
             Stage(
                 partial(_trained, config, ckpt),
-                Job(f"train {model.name}", fit, ("features",), remote, threads, gpus),
+                Job(f"train {model.name}", fit, ("features",), True, 1, gpus),
             ),
             Stage(
                 partial(_eval_done, ev),
-                Job(f"evaluate {model.name}", drive, (f"train {model.name}",), remote, sweep.workers, gpus),
+                Job(f"evaluate {model.name}", drive, (f"train {model.name}",), True, 1, gpus),
             ),
         ]
     # One video, of the model the report shows: its first canyon driven again (the same run). Which
