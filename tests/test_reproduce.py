@@ -223,3 +223,23 @@ def test_fig5_draws_a_sweep_whose_only_variant_is_not_the_preset(tmp_path):
         (folder / "metrics.csv").write_text("epoch,train_loss,val_loss,val_loss_std,seconds\n" + rows)
     plot_fig5(tmp_path, sweep, tmp_path / "drawn.png")
     assert (tmp_path / "drawn.png").read_bytes() != (tmp_path / "empty.png").read_bytes()
+
+
+@pytest.mark.slow
+def test_bench_device_times_a_preset_and_measures_on_what_it_made(smoke, tmp_path, capsys):
+    """`depthq bench device` on a finished smoke folder: its stages resume (nothing reruns), then every
+    component is measured on its data and model, into one JSON record; a bad preset is refused first."""
+    out = tmp_path / "bench"
+    shutil.copytree(smoke, out / "sweep")
+    before = (out / "sweep" / "stages.json").read_bytes()
+    argv = ["bench", "device", "--preset", "smoke", "--out", str(out), "--seconds", "1", "--steps", "20",
+            "--device", "cpu"]
+    assert main(argv) == 0
+    assert "smoke on cpu:" in capsys.readouterr().out
+    record = read_json(out / "bench.json")
+    assert (out / "sweep" / "stages.json").read_bytes() == before
+    assert record["stage_total_s"] == pytest.approx(sum(json.loads(before).values()), abs=0.2)
+    assert record["features"]["precisions"]["fp32"]["frames_per_s"] > 0
+    assert record["policy"]["policies"][0]["ms_median"] > 0 and record["sim"]["steps_per_s"] > 0
+    assert main(["bench", "device", "--preset", "tiny", "--out", str(tmp_path / "no")]) == 2
+    assert not (tmp_path / "no").exists()

@@ -65,13 +65,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     step.add_argument("--canyon", default="val:1000", help="the canyon driven (its family's world)")
     step.add_argument("--steps", type=int, default=50, help="steps timed, part by part")
     step.add_argument("--threads", type=int, default=1, help="torch threads (an evaluation worker has 1)")
+    dev = sub.add_parser(
+        "device", help="the whole picture on one device: a preset's stage times, then features, training, "
+        "a decision, a step's parts and env steps/s measured on what it made (OUT/bench.json)")
+    dev.add_argument("--preset", default="quick",
+                     help="the preset run (resumed) into OUT/sweep (default: quick)")
+    dev.add_argument("--out", type=Path, required=True, help="output folder (created; its sweep resumed)")
+    dev.add_argument("--seconds", type=float, default=10.0, help="seconds of head training measured")
+    dev.add_argument("--steps", type=int, default=200, help="env steps per worker, one worker per core")
     for parser in (col, ev, step):
         parser.add_argument("--look", default=None,
                             help="the look driven in: flat, colours, textured, heldout or a folder of images "
                             "(docs/design.md#looks; default: the canyons' family's own)")
-    for parser in (sim, col, feat, tr, pol, ev, step):
+    for parser in (sim, col, feat, tr, pol, ev, step, dev):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
-    for parser in (feat, tr, pol, ev, step):
+    for parser in (feat, tr, pol, ev, step, dev):
         parser.add_argument("--device", default="auto", help=DEVICE_HELP)
 
 
@@ -161,6 +169,21 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
             f"(×{r['speedup']}), {'the same' if r['same_runs'] else 'DIFFERENT'} runs"
         )
+    if args.what == "device":
+        _positive("--seconds", args.seconds)
+        _positive("--steps", args.steps)
+        from depthq.bench.device import bench_device  # torch, mujoco: off the CLI's startup
+        from depthq.pipeline.presets import get_preset
+
+        get_preset(args.preset)  # an unknown preset fails here, before any work
+        r = bench_device(args.out, args.preset, args.device, args.seconds, args.steps)
+        parts = {"stages": f"{r['stage_total_s']} s of stage time",
+                 "features": f"{r['features']['precisions']['fp32']['frames_per_s']} frames/s",
+                 "train": f"{r['train']['variants'][next(iter(r['train']['variants']))]['ratio']} × matmul",
+                 "decision": f"{r['policy']['policies'][0]['ms_median']} ms",
+                 "step floor": f"{r['step']['floor_ms_per_step']} ms",
+                 "sim": f"{r['sim']['steps_per_s']} env steps/s on {r['sim']['workers']} workers"}
+        return r, f"{args.preset} on {r['device']}: " + "; ".join(f"{k} {v}" for k, v in parts.items())
     if args.what == "step":
         _positive("--steps", args.steps)
         _positive("--threads", args.threads)
