@@ -31,8 +31,9 @@ from depthq.experiments.cells import mean_interval
 from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import chosen_weights, read_config, read_sidecar, weights_stem
 from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import Sweep, parse_setting, retarget, widened
-from depthq.report.reproduce import run_sweep
+from depthq.report.build import build_report
 
 SIZES, SEEDS = (200, 500), (0, 1)
 PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "weights=final")
@@ -130,7 +131,7 @@ def run(ladder: Ladder, out: Path) -> int:
             for net in rung.nets:
                 sweep = sweep_of(ladder, rung, net, (seed,))
                 print(f"{sweep.name} into {folder(out, rung)}: {net}, seed {seed}, {rung.name}", flush=True)
-                run_sweep(sweep, folder(out, rung))
+                run_sweep(sweep, folder(out, rung), finish=build_report)
     return table(ladder, out)
 
 

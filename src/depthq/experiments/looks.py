@@ -38,8 +38,9 @@ from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import CONFIG
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints, retarget, widened
-from depthq.report.reproduce import run_sweep
+from depthq.report.build import build_report
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
@@ -110,7 +111,7 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset} in the {look} look",
                         train=tuple({**dict(sweep.train), **dict(training)}.items()))
         print(f"sweep in the {look} look → {out / look / 'sweep'}", flush=True)
-        run_sweep(sweep, out / look / "sweep", progress=progress, device=device)
+        run_sweep(sweep, out / look / "sweep", progress=progress, device=device, finish=build_report)
         camera_labels.run(out / look / "sweep", out / look / "camera", method, runs=runs, seeds=seeds,
                           canyons=choose, time_limit_s=time_limit_s, look=look,
                           labeller_settings=labeller_settings, training=training, workers=workers,

@@ -47,6 +47,7 @@ from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import load_qnet
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (
     Settings,
     Sweep,
@@ -57,8 +58,8 @@ from depthq.pipeline.sweep import (
     retarget,
     widened,
 )
+from depthq.report.build import build_report
 from depthq.report.findings import FINDINGS, Evidence, record_evidence
-from depthq.report.reproduce import run_sweep
 from depthq.train.features import load_features
 
 
@@ -143,7 +144,7 @@ def run(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES)
     for seed in setup.seeds:
         for candidate in candidates:
             print(f"{out}: {candidate.name}, seed {seed}", flush=True)
-            run_sweep(sweep_of(setup, candidate, (seed,)), out)
+            run_sweep(sweep_of(setup, candidate, (seed,)), out, finish=build_report)
             measure(out, setup, (candidate,))
     print(table(out, setup, candidates))
     return 0

@@ -50,8 +50,9 @@ from depthq.nets.checkpoint import (
     weights_stem,
     write_sidecar,
 )
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints
-from depthq.report.reproduce import run_sweep
+from depthq.report.build import build_report
 from depthq.train.folder import METRICS
 
 PROG = "python -m depthq.experiments.training_length"
@@ -116,7 +117,7 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
     measured: dict[str, Any] = read_json(path) if path.is_file() else {}
     for seed in setup.seeds:
         sweep = sweep_of(setup, chosen, (seed,))
-        run_sweep(sweep, out)  # the training and its final weights' evaluation
+        run_sweep(sweep, out, finish=build_report)  # the training and its final weights' evaluation
         (model,) = (m.name for m in sweep.models())
         for epoch, name, weights in _points(model, epochs, snapshots, average):
             folder = out / "eval" / name
