@@ -27,13 +27,13 @@ import numpy as np
 
 from depthq.configio import read_json
 from depthq.data.labels import HORIZON
-from depthq.experiments.cells import mean_interval
-from depthq.experiments.cli import guarded
+from depthq.errors import guarded
 from depthq.nets.checkpoint import chosen_weights, read_config, read_sidecar, weights_stem
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import Sweep, parse_setting, retarget, widened
 from depthq.report.build import build_report
+from depthq.report.cells import mean_interval
 
 SIZES, SEEDS = (200, 500), (0, 1)
 PAPER_SETTINGS = ("action_scale=1", "dropout=0.5", "trunk=efficientnet_lite0", "epochs=200", "weights=final")

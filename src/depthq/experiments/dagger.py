@@ -42,13 +42,12 @@ from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
 from depthq.data.subsets import select_runs
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate
-from depthq.experiments.cells import evaluation_summary, mean_interval
-from depthq.experiments.cli import guarded
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import Model, Sweep, parse_ints, retarget, widened
 from depthq.policies.registry import make_policy
+from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.sim.env import CanyonEnv
 from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train

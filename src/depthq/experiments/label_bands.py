@@ -24,7 +24,7 @@ from tqdm import tqdm
 from depthq.configio import read_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.experiments.camera_labels import (
     SUMMARY,
     camera_config,
@@ -33,10 +33,9 @@ from depthq.experiments.camera_labels import (
     parse_settings,
     read_setup,
 )
-from depthq.experiments.cells import mean_interval
-from depthq.experiments.cli import guarded
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.sweep import parse_ints
+from depthq.report.cells import mean_interval
 from depthq.train.trainer import train
 
 PROG = "python -m depthq.experiments.label_bands"

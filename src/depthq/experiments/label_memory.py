@@ -22,8 +22,7 @@ from tqdm import tqdm
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
-from depthq.errors import ConfigError
-from depthq.experiments.cli import guarded
+from depthq.errors import ConfigError, guarded
 from depthq.train import floor
 from depthq.train.labeller import check_applicable, load_labeller
 

@@ -23,8 +23,7 @@ import numpy as np
 
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
-from depthq.experiments.cli import guarded
+from depthq.errors import ConfigError, guarded
 from depthq.experiments.truth import canyon
 from depthq.sim.canyon import FAMILIES, CanyonId, generate_canyon
 from depthq.sim.mjcf import RobotConfig

@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from depthq.experiments.cells import evaluation_summary, mean_interval
+from depthq.report.cells import evaluation_summary, mean_interval
 
 SIZES, SEEDS, K = (200, 500), (0, 1, 2), 3
 NETS = (  # label, folder argument index, model name pattern

@@ -31,16 +31,16 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
+from depthq.errors import guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
-from depthq.experiments.cells import evaluation_summary, mean_interval
-from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import CONFIG
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints, retarget, widened
 from depthq.report.build import build_report
+from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for

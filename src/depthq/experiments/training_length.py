@@ -33,12 +33,10 @@ import matplotlib.pyplot as plt
 import torch
 
 from depthq.configio import atomic_write_bytes, read_json, write_json
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import measure_agreement
-from depthq.experiments.cells import evaluation_summary, ranks_driving
-from depthq.experiments.cli import guarded
 from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.nets.checkpoint import (
     chosen_weights,
@@ -53,6 +51,7 @@ from depthq.nets.checkpoint import (
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.build import build_report
+from depthq.report.cells import evaluation_summary, ranks_driving
 from depthq.train.folder import METRICS
 
 PROG = "python -m depthq.experiments.training_length"
