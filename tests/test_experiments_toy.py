@@ -30,7 +30,6 @@ from depthq.experiments import (
     investigation,
     lookahead,
     precision,
-    success_vs_runs,
     truth,
     val_choices,
 )
@@ -49,7 +48,7 @@ def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_pytho
     assert not sorted(DOCS.rglob("*.py"))
     names = [m.name for m in pkgutil.iter_modules(experiments.__path__)]
     assert {"ablation", "action_fidelity", "hard_canyons", "investigation", "lookahead", "precision",
-            "success_vs_runs", "val_choices"} <= set(names)
+            "val_choices"} <= set(names)
     for name in names:
         module = importlib.import_module(f"depthq.experiments.{name}")
         if not hasattr(module, "main"):  # a shared helper (cells, truth)
@@ -212,21 +211,6 @@ def test_hard_canyons_measures_a_candidate_and_draws_the_chosen_one(tmp_path: Pa
     assert len(lines) == 3 and lines[2].startswith("| short (chosen) | ")
     assert lines[2].split(" | ")[1] in ("0/1", "1/1")
     assert (tmp_path / "hard_canyons.png").stat().st_size > 1000
-
-
-def test_success_vs_runs_draws_the_per_seed_table(tmp_path: Path) -> None:
-    (tmp_path / "results.md").write_text(
-        "Per seed (successes / mean distance in m):\n\n"
-        "| runs | DQN: successes/m per seed | CQN: successes/m per seed | paper DQN, CQN (mean) |\n"
-        "|---|---|---|---|\n"
-        "| 50 | 13/15.8, 10/13.1 | 0/3.8, 2/7.4 | 0.0/1.68, 0.0/1.07 |\n"
-        "| 200 | 17/18.3, 13/15.6 | 19/20.5, 20/21.3 | 8.0/12.19, 0.0/2.69 |\n\n"
-        "Per seed (successes / mean distance in m):\n\n| 900 | 1/1.0 | 1/1.0 | 1.0/1.0, 1.0/1.0 |\n"
-    )
-    rows = success_vs_runs.per_seed_table((tmp_path / "results.md").read_text())
-    assert rows == [(50, [13, 10], [0, 2], 0.0, 0.0), (200, [17, 13], [19, 20], 8.0, 0.0)]
-    assert success_vs_runs.main(["--docs", str(tmp_path)]) == 0
-    assert (tmp_path / "success_vs_runs.png").stat().st_size > 1000
 
 
 # The smoke run's ladder: its defaults (reused from the copy) and Depth-Q-Net with a lookahead of 3.
