@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from depthq.errors import ConfigError
-from depthq.experiments import oracle_gap, privileged, training_length
 from depthq.nets.checkpoint import read_weights
+from research import oracle_gap, privileged, training_length
 
 
 @pytest.mark.slow

@@ -2,11 +2,11 @@
 Coll-Q-Net, in the hard family's `val` canyons; and each model's agreement with the one-step oracle
 along its own runs.
 
-    python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
-    python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
-    python -m depthq.experiments.oracle_gap predicts OUT [--figure PATH]
-    python -m depthq.experiments.oracle_gap where OUT [--figure PATH]
-    python -m depthq.experiments.oracle_gap dead MODEL[,MODEL…]
+    python -m research.oracle_gap run OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
+    python -m research.oracle_gap table OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
+    python -m research.oracle_gap predicts OUT [--figure PATH]
+    python -m research.oracle_gap where OUT [--figure PATH]
+    python -m research.oracle_gap dead MODEL[,MODEL…]
 
 `run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
 measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
@@ -15,6 +15,10 @@ the diagnostic's measures predicts driving across all of them, `where` which sta
 bins each model gets wrong (each with a figure); `dead` which bins a checkpoint predicts as 0 always.
 The `eval` canyons are never driven here. The paired comparison of both networks in a sweep folder
 is `python -m depthq.report.paired`.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/oracle_gap.md came from the code of commit 0471132 (2026-11-26: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -399,7 +403,7 @@ def compare(named: list[tuple[str, Path]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
+        prog="python -m research.oracle_gap", description=__doc__.split("\n")[0]
     )
     parser.add_argument("action", choices=("run", "table", "predicts", "where", "dead", "compare"))
     parser.add_argument("out", help="the sweep folder the candidates share; compare: NAME=EVAL,NAME=EVAL,…; "
@@ -411,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure", type=Path,
                         help="predicts, where: the figure (default OUT/diagnostics.png, OUT/where.png)")
     args = parser.parse_args(argv)
-    return guarded(f"python -m depthq.experiments.oracle_gap {args.action}", lambda: _act(args))
+    return guarded(f"python -m research.oracle_gap {args.action}", lambda: _act(args))
 
 
 def _act(args: argparse.Namespace) -> int:
