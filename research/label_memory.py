@@ -27,8 +27,8 @@ from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
 from depthq.errors import ConfigError, guarded
-from depthq.train import floor
-from depthq.train.labeller import check_applicable, load_labeller
+from depthq.labellers import floor
+from depthq.labellers.labeller import check_applicable, load_labeller
 
 PROG = "python -m research.label_memory"
 

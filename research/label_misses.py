@@ -28,10 +28,10 @@ import numpy as np
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
+from depthq.labellers.labeller import LabellerConfig, bin_geometry
 from depthq.sim.canyon import FAMILIES, CanyonId, generate_canyon
 from depthq.sim.mjcf import RobotConfig
 from depthq.sim.sensors import BinConfig
-from depthq.train.labeller import LabellerConfig, bin_geometry
 from research.truth import canyon
 
 PROG = "python -m research.label_misses"

@@ -21,7 +21,7 @@ VERB_CONFIGS = [
     (("collect",), "depthq.data.recorder:CollectConfig", (), None),
     (("evaluate",), "depthq.evaluate.online:EvalConfig", ("canyons",), None),  # --canyons: a canyon set
     (("drive",), "depthq.evaluate.online:EvalConfig", ("canyons", "lockstep"), None),  # --canyon: one
-    (("labeller",), "depthq.train.labeller:LabellerConfig", (), None),
+    (("labeller",), "depthq.labellers.labeller:LabellerConfig", (), None),
     (("dataset", "stats"), "depthq.data:DataConfig", ("jpeg_quality",), None),  # storage: not a count
     (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
                                                             "env.world.family")),

@@ -14,8 +14,8 @@ import pytest
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
+from depthq.labellers.labeller import LabellerConfig, train_labeller
 from depthq.sim.sensors import BinConfig
-from depthq.train.labeller import LabellerConfig, train_labeller
 from research import label_bands, label_memory, label_misses
 
 TOY_FLOOR = {"method": "floor", "steps": 5, "batch_size": 4, "pool_runs": 2, "pool_frames": 3, "width": 8}

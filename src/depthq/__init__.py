@@ -16,6 +16,8 @@ source against it, folders and files):
                                             `make_policy`, which builds any policy from its spec
     ← train                                 the trainer, its checkpoints, and the offline metric that
                                             re-runs its validation
+    ← labellers                             the camera labellers: learned models that estimate depth bins
+                                            from the camera (`depthq labeller`, `depthq label`)
     ← evaluate | deploy                     online evaluation and the calibration probe (`depthq probe`) |
                                             ONNX export, the robot's node core, `depthq ros`'s
                                             ROS 1 nodes and the simulated robot

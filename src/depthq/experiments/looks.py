@@ -36,6 +36,7 @@ from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
 from depthq.flags import build_config
+from depthq.labellers.labeller import LabellerConfig
 from depthq.nets.checkpoint import CONFIG
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
@@ -47,7 +48,6 @@ from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
-from depthq.train.labeller import LabellerConfig
 
 PROG = "python -m depthq.experiments.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
