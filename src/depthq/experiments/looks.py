@@ -63,25 +63,18 @@ NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera lab
 # defaults no longer hold (none on that commit), so the documented command trains the same nets on a
 # later commit. The camera-label Depth-Q-Net trains as
 # the LiDAR one (`camera_labels.camera_config`), on camera labels.
+_PINNED_DEPTH: dict[str, Any] = {
+    "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
+    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
+    "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
+    "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "depth_first",
+    "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
+    "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
+    "samples.action_lag": 0, "weights": "average", "snapshots": [], "average": 0.25, "precision": "fp32",
+}
 PINNED_TRAINING: dict[str, dict[str, Any]] = {
-    "depth": {
-        "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
-        "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
-        "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
-        "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "depth_first",
-        "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
-        "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
-        "samples.action_lag": 0, "weights": "average", "snapshots": [], "average": 0.25, "precision": "fp32",
-    },
-    "coll": {
-        "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
-        "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
-        "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
-        "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "concat",
-        "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
-        "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
-        "samples.action_lag": 0, "weights": "best", "snapshots": [], "average": 0.0, "precision": "fp32",
-    },
+    "depth": _PINNED_DEPTH,
+    "coll": {**_PINNED_DEPTH, "head_form": "concat", "weights": "best", "average": 0.0},  # every field
 }
 # The monodepth labeller's settings (LabellerConfig, besides its data and method), pinned as above.
 PINNED_LABELLER: dict[str, Any] = {
