@@ -61,8 +61,8 @@ NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera lab
 # as the `hard` preset and the defaults of commit 0ab0c20 gave them, where the run behind
 # docs/design.md#looks started. `run` gives every training the pinned values today's preset and
 # defaults no longer hold (none on that commit), so the documented command trains the same nets on a
-# later commit. The camera-label Depth-Q-Net trains as
-# the LiDAR one (`camera_labels.camera_config`), on camera labels.
+# later commit. The camera-label Depth-Q-Net trains as the LiDAR one (`camera_labels.camera_config`),
+# on camera labels.
 _PINNED_DEPTH: dict[str, Any] = {
     "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
     "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
@@ -86,6 +86,9 @@ PINNED_LABELLER: dict[str, Any] = {
 PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller trains as it does today
 
 
+_GONE = object()
+
+
 def _flat(config: Any, prefix: str = "") -> dict[str, Any]:
     """A config's fields by path ('samples.horizon'), JSON values; a training's "lr" its effective rate."""
     values = json.loads(json.dumps(asdict(config))) if not isinstance(config, dict) else config
@@ -105,7 +108,7 @@ def _restoring(pins: dict[str, dict[str, Any]], built: dict[str, dict[str, Any]]
     needed: dict[str, Any] = {}
     for name, pin in pins.items():
         for key, value in pin.items():
-            if key not in given and built[name][key] != value:
+            if key not in given and built[name].get(key, _GONE) != value:  # gone: build_config names it
                 needed[key] = value
     for key, value in needed.items():
         if clash := [name for name, pin in pins.items() if pin[key] != value]:
