@@ -1,4 +1,4 @@
-"""The experiments of `depthq.experiments` at toy size, on a copy of the suite's smoke run (a real
+"""The oracle-gap investigations of research/ (oracle_gap, privileged, training_length) at toy size, on a copy of the suite's smoke run (a real
 collection, trainings and evaluations): each runs, resumes and tabulates what it measured."""
 
 from __future__ import annotations
