@@ -1,5 +1,6 @@
-"""The oracle-gap investigations of research/ (oracle_gap, privileged, training_length) at toy size, on a copy of the suite's smoke run (a real
-collection, trainings and evaluations): each runs, resumes and tabulates what it measured."""
+"""The oracle-gap investigations of research/ (oracle_gap, privileged, training_length) at toy size,
+on a copy of the suite's smoke run (a real collection, trainings and evaluations): each runs, resumes
+and tabulates what it measured."""
 
 from __future__ import annotations
 
