@@ -17,9 +17,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.runfile import file_sha256, write_labelled
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import read_config
-from depthq.train.config import TrainConfig
-from depthq.train.labeller import (
+from depthq.labellers.labeller import (
     CONFIG,
     WEIGHTS,
     LabellerConfig,
@@ -27,6 +25,8 @@ from depthq.train.labeller import (
     load_labeller,
     train_labeller,
 )
+from depthq.nets.checkpoint import read_config
+from depthq.train.config import TrainConfig
 
 TOY_LABELLER = {"method": "perception", "hidden": 64, "steps": 40, "batch_size": 16, "lr": 1.0,
                 "input_size": 64}

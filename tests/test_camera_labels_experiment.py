@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from depthq.data.manifest import Dataset
-from depthq.experiments import camera_labels, label_bands
+from depthq.experiments import camera_labels
 from depthq.nets.checkpoint import read_config
+from research import label_bands
 
 TOY = [
     "--method", "floor", "--runs", "6", "--seeds", "0", "--canyons", "val:1000", "--time-limit", "5",

@@ -1,5 +1,6 @@
-"""The experiments of `depthq.experiments` at toy size, on a copy of the suite's smoke run (a real
-collection, trainings and evaluations): each runs, resumes and tabulates what it measured."""
+"""The oracle-gap investigations of research/ (oracle_gap, privileged, training_length) at toy size,
+on a copy of the suite's smoke run (a real collection, trainings and evaluations): each runs, resumes
+and tabulates what it measured."""
 
 from __future__ import annotations
 
@@ -11,9 +12,8 @@ import pytest
 import torch
 
 from depthq.errors import ConfigError
-from depthq.experiments import oracle_gap, privileged, training_length
 from depthq.nets.checkpoint import read_weights
-from depthq.report.findings import FINDINGS, read_findings
+from research import oracle_gap, privileged, training_length
 
 
 @pytest.mark.slow
@@ -37,26 +37,6 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     assert f"{summary['distance_to_collision_mean']:.2f}" in rows[3]
     assert f"| b | `{names[1]}` | {summary['distance_to_collision_mean']:.2f} |" in oracle_gap.compare(
         [("b", out / "eval" / names[1])])
-    # Paired by seed: the smoke run's own Table I, both networks at 3 and 6 runs (a seed 1 never ran).
-    table = oracle_gap.paired(smoke, (3, 6), (0, 1)).splitlines()
-    assert len(table) == 2 + 2 * len(oracle_gap.PAIRED)
-    coll, depth = (json.loads((smoke / "eval" / f"{net}_n6_s0" / "summary.json").read_text())["summary"]
-                   for net in ("coll", "depth"))
-    first = (f"| 6 | 0 | to first collision (m) | {coll['distance_to_collision_mean']:.2f} | "
-             f"{depth['distance_to_collision_mean']:.2f} | "
-             f"{depth['distance_to_collision_mean'] - coll['distance_to_collision_mean']:.2f} |")
-    assert first in table
-    # The comparison as a claim's evidence in a copy of the findings file, in words made from the runs.
-    findings = tmp_path / "findings.json"
-    shutil.copy(FINDINGS, findings)
-    args = ["paired", str(smoke), "--sizes", "6", "--seeds", "0", "--claim", "table-i",
-            "--findings", str(findings)]
-    assert oracle_gap.main(args) == 0
-    canyons = json.loads((smoke / "reproduce.json").read_text())["sweep"]["canyons"]
-    evidence = read_findings(findings).claim("table-i").evidence[f"{canyons}, 4 Hz, 6 runs"]
-    assert f"Depth-Q-Net {depth['distance_to_collision_mean']:.2f} m" in evidence.text
-    assert evidence.by == "python -m depthq.experiments.oracle_gap " + " ".join(args)
-    assert oracle_gap.main([*args[:-4], "--claim", "no-such-claim", "--findings", str(findings)]) == 2
     assert "| agrees, decisive steps | 2 | – | – |" in oracle_gap.predicts(out)  # 2 models: no ρ
     oracle_gap.plot_predicts(out, out / "diagnostics.png")
     assert (out / "diagnostics.png").stat().st_size > 5000

@@ -1,5 +1,5 @@
-"""The experiments behind the docs' measurements (ablation, action fidelity, hard canyons, the
-investigation, the lookahead table, precision, success vs runs, val choices, DAgger rounds) at toy size: real
+"""The investigations behind the docs' measurements (research/: action fidelity, hard canyons, the
+investigation, the lookahead table, precision, val choices, DAgger rounds) at toy size: real
 collections in the hard family, real trainings and evaluations, a copy of the suite's smoke run."""
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import research
 from depthq import experiments
 from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
@@ -22,22 +23,23 @@ from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
-from depthq.experiments import (
-    ablation,
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
+from depthq.pipeline.sweep import parse_setting, widened
+from depthq.sim.canyon import HARD_CANYON
+from depthq.sim.sensors import depth_bins, finish_scan
+from depthq.train.config import TrainConfig
+from depthq.train.trainer import train
+from research import (
     action_fidelity,
     dagger,
     hard_canyons,
     investigation,
     lookahead,
     precision,
-    success_vs_runs,
     truth,
     val_choices,
 )
-from depthq.sim.canyon import HARD_CANYON
-from depthq.sim.sensors import depth_bins, finish_scan
-from depthq.train.config import TrainConfig
-from depthq.train.trainer import train
 
 TOY_TRAINING = {"epochs": 2, "train_batches": 5, "val_batches": 2}
 DOCS = Path(__file__).resolve().parents[1] / "docs"
@@ -46,18 +48,23 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_python(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
+    """The package ships the live experiments (how a published table is made now); the finished
+    investigations are research/'s, outside the wheel; each runs as `python -m <its module>`."""
     assert not sorted(DOCS.rglob("*.py"))
-    names = [m.name for m in pkgutil.iter_modules(experiments.__path__)]
-    assert {"ablation", "action_fidelity", "hard_canyons", "investigation", "lookahead", "precision",
-            "success_vs_runs", "val_choices"} <= set(names)
-    for name in names:
-        module = importlib.import_module(f"depthq.experiments.{name}")
-        if not hasattr(module, "main"):  # a shared helper (cells, truth)
+    live = [f"depthq.experiments.{m.name}" for m in pkgutil.iter_modules(experiments.__path__)]
+    finished = [f"research.{m.name}" for m in pkgutil.iter_modules(research.__path__)]
+    assert set(live) == {"depthq.experiments.camera_labels", "depthq.experiments.looks",
+                         "depthq.experiments.ros_fidelity"}
+    assert {f"research.{name}" for name in ("action_fidelity", "hard_canyons", "investigation", "lookahead",
+                                            "oracle_gap", "precision", "val_choices")} <= set(finished)
+    for name in live + finished:
+        module = importlib.import_module(name)
+        if not hasattr(module, "main"):  # a shared helper (truth)
             continue
         with pytest.raises(SystemExit) as exit_:
             module.main(["--help"])
         assert exit_.value.code == 0
-        assert capsys.readouterr().out.startswith(f"usage: python -m depthq.experiments.{name}")
+        assert capsys.readouterr().out.startswith(f"usage: python -m {name}")
 
 
 @pytest.fixture(scope="module")
@@ -214,58 +221,21 @@ def test_hard_canyons_measures_a_candidate_and_draws_the_chosen_one(tmp_path: Pa
     assert (tmp_path / "hard_canyons.png").stat().st_size > 1000
 
 
-def test_success_vs_runs_draws_the_per_seed_table(tmp_path: Path) -> None:
-    (tmp_path / "results.md").write_text(
-        "Per seed (successes / mean distance in m):\n\n"
-        "| runs | DQN: successes/m per seed | CQN: successes/m per seed | paper DQN, CQN (mean) |\n"
-        "|---|---|---|---|\n"
-        "| 50 | 13/15.8, 10/13.1 | 0/3.8, 2/7.4 | 0.0/1.68, 0.0/1.07 |\n"
-        "| 200 | 17/18.3, 13/15.6 | 19/20.5, 20/21.3 | 8.0/12.19, 0.0/2.69 |\n\n"
-        "Per seed (successes / mean distance in m):\n\n| 900 | 1/1.0 | 1/1.0 | 1.0/1.0, 1.0/1.0 |\n"
-    )
-    rows = success_vs_runs.per_seed_table((tmp_path / "results.md").read_text())
-    assert rows == [(50, [13, 10], [0, 2], 0.0, 0.0), (200, [17, 13], [19, 20], 8.0, 0.0)]
-    assert success_vs_runs.main(["--docs", str(tmp_path)]) == 0
-    assert (tmp_path / "success_vs_runs.png").stat().st_size > 1000
-
-
-# The smoke run's ladder: its defaults (reused from the copy) and Depth-Q-Net with a lookahead of 3.
-TOY_LADDER = ablation.Ladder(
-    "paper", "smoke", "eval:0-1", (ablation.Rung("ours"),),
-    (ablation.Rung("lookahead 3", ("lookahead=3",), nets=("depth",), seeds=(0,)),), sizes=(6,), seeds=(0,),
-)
-
-
 @pytest.fixture(scope="module")
-def ladder(smoke: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The toy ladder climbed in a copy of the smoke run (its 4 Hz sweep folder)."""
-    out = tmp_path_factory.mktemp("ladder")
-    shutil.copytree(smoke, out / "4hz")
-    assert ablation.run(TOY_LADDER, out) == 0
+def looked_ahead(smoke: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the smoke run with a Depth-Q-Net looking 3 steps ahead beside its own (`depthq sweep
+    --preset smoke --nets depth --sizes 6 --seeds 0 --set lookahead=3`)."""
+    out = tmp_path_factory.mktemp("lookahead") / "sweep"
+    shutil.copytree(smoke, out)
+    sweep = widened(get_preset("smoke"), name="smoke sweep", subsets=(6,), seeds=(0,), nets=("depth",),
+                    grid=(parse_setting("lookahead=3"),))
+    run_sweep(sweep, out, progress=False)
     return out
 
 
 @pytest.mark.slow
-def test_the_ablation_ladder_runs_its_rungs_and_tabulates_them(ladder: Path) -> None:
-    text = (ladder / "ablation.md").read_text()
-    assert "`python -m depthq.experiments.ablation run paper OUT`" in text
-    rows = {line.split(" | ")[0] + " | " + line.split(" | ")[1]: line for line in text.splitlines()
-            if line.startswith("| ours") or line.startswith("| lookahead 3")}
-    assert set(rows) == {"| ours | Depth-Q-Net", "| ours | Coll-Q-Net", "| lookahead 3 | Depth-Q-Net"}
-    evaluation = ladder / "4hz" / "eval" / "depth_n6_s0_lookahead3" / "summary.json"
-    s = json.loads(evaluation.read_text())["summary"]
-    assert f"| 6 | {s['successes']:.1f} | {s['distance_mean']:.2f} | " in rows["| lookahead 3 | Depth-Q-Net"]
-    assert "(1 of 2 seeds)" in rows["| ours | Depth-Q-Net"]  # the rung's seeds are 0 and 1
-    for figure in ("ablation.png", "horizon.png"):
-        assert (ladder / figure).stat().st_size > 1000
-    stamp = evaluation.stat().st_mtime_ns
-    assert ablation.run(TOY_LADDER, ladder) == 0  # resumed: nothing trained or driven again
-    assert evaluation.stat().st_mtime_ns == stamp
-
-
-@pytest.mark.slow
-def test_the_lookahead_table_pairs_the_two_depth_q_nets_by_seed(ladder: Path) -> None:
-    folder = ladder / "4hz"
+def test_the_lookahead_table_pairs_the_two_depth_q_nets_by_seed(looked_ahead: Path) -> None:
+    folder = looked_ahead
     lines = lookahead.table((folder, folder), sizes=(6,), seeds=(0,)).splitlines()
     assert [line.split(" | ")[0] for line in lines[2:]] == [
         "| Coll-Q-Net", "| Depth-Q-Net, one step", "| Depth-Q-Net, lookahead 3",

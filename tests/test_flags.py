@@ -21,7 +21,7 @@ VERB_CONFIGS = [
     (("collect",), "depthq.data.recorder:CollectConfig", (), None),
     (("evaluate",), "depthq.evaluate.online:EvalConfig", ("canyons",), None),  # --canyons: a canyon set
     (("drive",), "depthq.evaluate.online:EvalConfig", ("canyons", "lockstep"), None),  # --canyon: one
-    (("labeller",), "depthq.train.labeller:LabellerConfig", (), None),
+    (("labeller",), "depthq.labellers.labeller:LabellerConfig", (), None),
     (("dataset", "stats"), "depthq.data:DataConfig", ("jpeg_quality",), None),  # storage: not a count
     (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
                                                             "env.world.family")),
@@ -180,10 +180,10 @@ def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
 def test_a_variant_names_each_networks_models_by_what_differs_from_its_own_default() -> None:
     """200 epochs, best weights (select=best, the setting's old name): Coll-Q-Net acts with its best
     weights by default, so only its epochs name its folders; Depth-Q-Net's (its weight average by
-    default) name both. `oracle_gap paired --set` finds a sweep's models by the same names."""
-    from depthq.experiments import oracle_gap
+    default) name both. `python -m depthq.report.paired --set` finds a sweep's models by the same names."""
     from depthq.pipeline.presets import get_preset
     from depthq.pipeline.sweep import differing, parse_setting, widened
+    from depthq.report import paired
 
     grid = (parse_setting("epochs=200"), parse_setting("select=best"))
     sweep = widened(get_preset("smoke"), grid=grid)
@@ -192,8 +192,8 @@ def test_a_variant_names_each_networks_models_by_what_differs_from_its_own_defau
     variant = (("epochs", 200), ("weights", "best"))
     assert differing("coll", variant) == (("epochs", 200),)
     assert differing("depth", variant, sweep.train) == variant
-    assert oracle_gap.main(["paired", "runs/none", "--set", "epochs=100,200"]) == 2  # one value each
-    assert oracle_gap.main(["paired", "runs/none", "--set", "epochs=100"]) == 2  # no sweep folder
+    assert paired.main(["runs/none", "--set", "epochs=100,200"]) == 2  # one value each
+    assert paired.main(["runs/none", "--set", "epochs=100"]) == 2  # no sweep folder
 
 
 def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> None:

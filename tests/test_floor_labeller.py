@@ -14,10 +14,8 @@ import pytest
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
-from depthq.sim.mjcf import CameraConfig, RobotConfig
-from depthq.sim.sensors import BinConfig
-from depthq.train import floor
-from depthq.train.labeller import (
+from depthq.labellers import floor
+from depthq.labellers.labeller import (
     CONFIG,
     LabellerConfig,
     check_applicable,
@@ -25,6 +23,8 @@ from depthq.train.labeller import (
     load_labeller,
     train_labeller,
 )
+from depthq.sim.mjcf import CameraConfig, RobotConfig
+from depthq.sim.sensors import BinConfig
 
 TOY_FLOOR = {"method": "floor", "steps": 30, "batch_size": 4, "lr": 3e-3, "pool_runs": 4, "pool_frames": 3,
              "width": 8}

@@ -1,7 +1,7 @@
-"""The floor labels' experiments: near-obstacle errors (`depthq.experiments.label_misses`), which
+"""The floor labels' experiments: near-obstacle errors (`research.label_misses`), which
 obstacle a bin's nearest reading hits by hand and the split on a toy floor labeller's labels of
 hard-family runs, its counts checked against the run files; and the memory length
-(`depthq.experiments.label_memory`), its rows against the labels `depthq label` writes."""
+(`research.label_memory`), its rows against the labels `depthq label` writes."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ import pytest
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
-from depthq.experiments import label_bands, label_memory, label_misses
+from depthq.labellers.labeller import LabellerConfig, train_labeller
 from depthq.sim.sensors import BinConfig
-from depthq.train.labeller import LabellerConfig, train_labeller
+from research import label_bands, label_memory, label_misses
 
 TOY_FLOOR = {"method": "floor", "steps": 5, "batch_size": 4, "pool_runs": 2, "pool_frames": 3, "width": 8}
 

@@ -36,3 +36,25 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     assert {p: p.stat().st_mtime_ns for p in out.rglob("summary.json")} == stamps
     assert looks.main(["run", str(tmp_path / "bad"), *TOY, "--drive-looks", "neon"]) == 2
     assert not (tmp_path / "bad").exists()
+
+
+def test_the_looks_experiment_trains_with_its_pinned_configs() -> None:
+    """Today's `hard` preset and defaults are the pinned ones (the experiment's run resumes as it
+    started); a default that moves is given back as a setting, and one the nets would need apart is
+    an error naming it."""
+    from depthq.errors import ConfigError
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import retarget, widened
+
+    sweep = widened(retarget(get_preset("hard"), family="hard", canyons=looks.CHOOSE, look="textured"), 500,
+                    subsets=(500,), seeds=(0,))
+    assert looks.pinned_training(sweep, 500, 0, ()) == ()
+    assert looks.pinned_training(sweep, 500, 0, (("epochs", 3),)) == (("epochs", 3),)
+    assert looks.pinned_labeller("monodepth", ()) == ()
+    moved = widened(sweep, train=(*sweep.train, ("dropout", 0.5), ("lr", 0.01)))  # as if defaults moved
+    assert dict(looks.pinned_training(moved, 500, 0, ())) == {"dropout": 0.0, "lr": 0.1}
+    assert looks.pinned_training(moved, 500, 0, (("dropout", 0.5),)) == (("lr", 0.1), ("dropout", 0.5))
+    assert looks.pinned_training(moved, 500, 0, (), preset="smoke") == ()
+    apart = widened(sweep, train=(*sweep.train, ("average", 0.5)))  # pinned 0.25 and 0.0
+    with pytest.raises(ConfigError, match="pinned average differently for depth"):
+        looks.pinned_training(apart, 500, 0, ())

@@ -23,11 +23,11 @@ import torch
 
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
+from depthq.labellers import floor, monodepth
+from depthq.labellers.labeller import CONFIG, LabellerConfig, label_dataset, load_labeller, train_labeller
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.mjcf import GROUND_GROUP, WALL_GROUP
 from depthq.sim.world import CanyonWorld, WorldConfig, world_for
-from depthq.train import floor, monodepth
-from depthq.train.labeller import CONFIG, LabellerConfig, label_dataset, load_labeller, train_labeller
 
 # scale 8 (51 × 38 pixels) and a batch of 12 drawn from 3 triplets: the loss falls clearly within 40
 # steps, where batches of other triplets would hide it.

@@ -16,14 +16,16 @@ source against it, folders and files):
                                             `make_policy`, which builds any policy from its spec
     ← train                                 the trainer, its checkpoints, and the offline metric that
                                             re-runs its validation
+    ← labellers                             the camera labellers: learned models that estimate depth bins
+                                            from the camera (`depthq labeller`, `depthq label`)
     ← evaluate | deploy                     online evaluation and the calibration probe (`depthq probe`) |
                                             ONNX export, the robot's node core, `depthq ros`'s
                                             ROS 1 nodes and the simulated robot
     ← pipeline                              a sweep's grid, presets, run folder and resumable stages
     ← report | bench                        a sweep folder's tables, figures, findings and HTML report |
                                             `depthq bench` figures
-    ← experiments                           the measurements behind the docs, run as modules (no verb
-                                            imports them)
+    ← experiments                           the live experiments behind the docs' tables, run as modules
+                                            (no verb imports them; finished ones are research/'s)
     ← scripts ← cli, cli_reference          one module per verb, the `depthq` command, its reference
                                             page (docs/cli.md)
 

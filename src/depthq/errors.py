@@ -5,6 +5,8 @@ from __future__ import annotations
 import errno
 import os
 import re
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -96,3 +98,16 @@ def _graphics(err: BaseException) -> str:
     backend = os.environ.get("MUJOCO_GL", "egl")
     return (f"MuJoCo cannot render offscreen (MUJOCO_GL={backend}): {detail[0]}; install EGL and Mesa "
             "(Debian: libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa, then " + _RESUME)
+
+
+def guarded(prog: str, work: Callable[[], int]) -> int:
+    """`work()`'s exit status, or the status and one line `explain` gives for what it raised: a module's
+    command line (`python -m …`) answers bad input as the `depthq` verbs do; a bug is shown in full."""
+    try:
+        return work()
+    except Exception as err:
+        status, line = explain(err)
+        if status is None:
+            raise
+        print(f"{prog}: {line}", file=sys.stderr)
+        return status

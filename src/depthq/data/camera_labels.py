@@ -25,7 +25,7 @@ class CameraLabels:
 
     bins: np.ndarray
     labeller: str  # the labeller's name, e.g. "perception"
-    fingerprint: str  # SHA-256 of what fixes its output (`depthq.train.labeller`): equal, equal labels
+    fingerprint: str  # SHA-256 of what fixes its output (`depthq.labellers.labeller`): equal, equal labels
 
     def __post_init__(self) -> None:
         if not isinstance(self.bins, np.ndarray) or self.bins.dtype != np.float32 or self.bins.ndim != 2:

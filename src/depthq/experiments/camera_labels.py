@@ -51,18 +51,10 @@ from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, from_dict, read_js
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import ERROR_BANDS, stats_report
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.experiments.cells import mean_interval
-from depthq.experiments.cli import guarded
 from depthq.flags import build_config
-from depthq.nets.checkpoint import CONFIG, read_config
-from depthq.pipeline.layout import model_name
-from depthq.pipeline.sweep import parse_ints, parse_setting
-from depthq.sim.canyon import PAPER
-from depthq.train.config import TrainConfig
-from depthq.train.folder import saved_epoch
-from depthq.train.labeller import (
+from depthq.labellers.labeller import (
     CAMERA_METHODS,
     METHODS,
     LabellerConfig,
@@ -70,7 +62,14 @@ from depthq.train.labeller import (
     load_labeller,
     train_labeller,
 )
-from depthq.train.labeller import CONFIG as LABELLER_CONFIG
+from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
+from depthq.nets.checkpoint import CONFIG, read_config
+from depthq.pipeline.layout import model_name
+from depthq.pipeline.sweep import parse_ints, parse_setting
+from depthq.report.cells import mean_interval
+from depthq.sim.canyon import PAPER
+from depthq.train.config import TrainConfig
+from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
 
 PROG = "python -m depthq.experiments.camera_labels"

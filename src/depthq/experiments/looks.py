@@ -23,26 +23,31 @@ interval] over seeds) in each driving look, and each look's share of the trainin
 from __future__ import annotations
 
 import argparse
+import json
 import sys
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw
 
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
-from depthq.experiments.cells import evaluation_summary, mean_interval
-from depthq.experiments.cli import guarded
+from depthq.flags import build_config
+from depthq.labellers.labeller import LabellerConfig
 from depthq.nets.checkpoint import CONFIG
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
-from depthq.pipeline.sweep import parse_ints, retarget, widened
-from depthq.report.reproduce import run_sweep
+from depthq.pipeline.runner import run_sweep
+from depthq.pipeline.sweep import Model, Settings, Sweep, parse_ints, retarget, widened
+from depthq.report.build import build_report
+from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
+from depthq.train.config import TrainConfig
 
 PROG = "python -m depthq.experiments.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
@@ -51,6 +56,85 @@ TRAIN_LOOKS = (COLOURS, TEXTURED)
 DRIVE_LOOKS = (COLOURS, TEXTURED, HELDOUT)
 CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment make their choices
 NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
+
+# Every setting the experiment's nets train with (TrainConfig field paths; "lr" the effective rate),
+# as the `hard` preset and the defaults of commit 0ab0c20 gave them, where the run behind
+# docs/design.md#looks started. `run` gives every training the pinned values today's preset and
+# defaults no longer hold (none on that commit), so the documented command trains the same nets on a
+# later commit. The camera-label Depth-Q-Net trains as the LiDAR one (`camera_labels.camera_config`),
+# on camera labels.
+_PINNED_DEPTH: dict[str, Any] = {
+    "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
+    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
+    "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
+    "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "depth_first",
+    "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
+    "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
+    "samples.action_lag": 0, "weights": "average", "snapshots": [], "average": 0.25, "precision": "fp32",
+}
+PINNED_TRAINING: dict[str, dict[str, Any]] = {
+    "depth": _PINNED_DEPTH,
+    "coll": {**_PINNED_DEPTH, "head_form": "concat", "weights": "best", "average": 0.0},  # every field
+}
+# The monodepth labeller's settings (LabellerConfig, besides its data and method), pinned as above.
+PINNED_LABELLER: dict[str, Any] = {
+    "trunk": "efficientnet_lite0_columns", "input_size": 128, "hidden": 4096, "scale": 4, "width": 16,
+    "context": True, "lookahead": 12, "nearest": 0.3, "memory_s": 2.0, "pool_frames": 6, "pool_runs": 300,
+    "min_depth": 0.1, "max_depth": 10.0, "smoothness": 0.001, "steps": 1500, "batch_size": 8, "lr": 0.001,
+    "seed": 0,
+}
+PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller trains as it does today
+
+
+_GONE = object()
+
+
+def _flat(config: Any, prefix: str = "") -> dict[str, Any]:
+    """A config's fields by path ('samples.horizon'), JSON values; a training's "lr" its effective rate."""
+    values = json.loads(json.dumps(asdict(config))) if not isinstance(config, dict) else config
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key: value})
+    if isinstance(config, TrainConfig):
+        out["lr"] = config.learning_rate
+    return out
+
+
+def _restoring(pins: dict[str, dict[str, Any]], built: dict[str, dict[str, Any]],
+               given: set[str]) -> tuple[tuple[str, Any], ...]:
+    """The settings (field path, value) that bring each built config back to its pin, but for the
+    fields `given` on the command line; every config takes them all (a sweep's settings are every
+    net's), so a setting must suit each pin."""
+    needed: dict[str, Any] = {}
+    for name, pin in pins.items():
+        for key, value in pin.items():
+            if key not in given and built[name].get(key, _GONE) != value:  # gone: build_config names it
+                needed[key] = value
+    for key, value in needed.items():
+        if clash := [name for name, pin in pins.items() if pin[key] != value]:
+            raise ConfigError(f"the defaults moved away from the looks experiment's pinned {key} differently "
+                              f"for {', '.join(clash)}: pin that setting per network in "
+                              f"depthq.experiments.looks")
+    return tuple(needed.items())
+
+
+def pinned_training(sweep: Sweep, runs: int, seed: int, given: Settings, preset: str = PINNED_PRESET
+                    ) -> Settings:
+    """`given` (the command's --set), after the pinned settings today's defaults no longer hold (for
+    the pinned preset's sweep)."""
+    if preset != PINNED_PRESET:
+        return tuple(given)
+    built = {net: _flat(sweep.train_config(Model(net, runs, seed), "data")) for net in PINNED_TRAINING}
+    return _restoring(PINNED_TRAINING, built, set(dict(given))) + tuple(given)
+
+
+def pinned_labeller(method: str, given: Settings) -> Settings:
+    """`given` (the command's --labeller-set), after the pinned labeller settings today's defaults no
+    longer hold (for the pinned method; another method's labeller is today's)."""
+    if method != PINNED_METHOD:
+        return tuple(given)
+    built = _flat(build_config(LabellerConfig, {"data": ".", "method": method}))
+    return _restoring({method: PINNED_LABELLER}, {method: built}, set(dict(given))) + tuple(given)
 
 
 def frames(canyon: str = CANYON, looks: tuple[str, ...] = LOOKS) -> dict[str, np.ndarray]:
@@ -107,13 +191,16 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         if time_limit_s is not None:
             limit = {**dict(sweep.evaluate), "time_limit_s": time_limit_s}
             sweep = replace(sweep, evaluate=tuple(limit.items()))
-        sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset} in the {look} look",
-                        train=tuple({**dict(sweep.train), **dict(training)}.items()))
+        sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset} in the {look} look")
+        pinned = pinned_training(sweep, runs, seeds[0], training, preset)
+        sweep = replace(sweep, train=tuple({**dict(sweep.train), **dict(pinned)}.items()))
         print(f"sweep in the {look} look → {out / look / 'sweep'}", flush=True)
-        run_sweep(sweep, out / look / "sweep", progress=progress, device=device)
+        run_sweep(sweep, out / look / "sweep", progress=progress, device=device, finish=build_report)
         camera_labels.run(out / look / "sweep", out / look / "camera", method, runs=runs, seeds=seeds,
                           canyons=choose, time_limit_s=time_limit_s, look=look,
-                          labeller_settings=labeller_settings, training=training, workers=workers,
+                          labeller_settings=pinned_labeller(method, labeller_settings),
+                          training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
+                          workers=workers,
                           device=device, progress=progress)
         for drive in drive_looks:
             config = replace(driving, look=drive)

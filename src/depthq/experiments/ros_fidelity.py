@@ -38,7 +38,7 @@ from depthq.deploy.canyon_robot import CanyonRobot, RobotSimConfig
 from depthq.deploy.robot import DriverConfig, Frame, RobotDriver, robot_policy
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.experiments.cells import mean_interval
+from depthq.report.cells import mean_interval
 
 
 def ros_run(checkpoint: Path, canyon: str, folder: Path, camera_hz: float, seed: int = 0) -> dict[str, Any]:

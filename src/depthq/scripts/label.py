@@ -22,7 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from depthq.data.manifest import Dataset
-    from depthq.train.labeller import label_dataset, load_labeller
+    from depthq.labellers.labeller import label_dataset, load_labeller
 
     dataset = Dataset.open(args.dir)
     labeller = load_labeller(args.labeller)

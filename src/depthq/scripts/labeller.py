@@ -11,7 +11,7 @@ from depthq.nets.device import DEVICE_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from depthq.train.labeller import LabellerConfig  # torch: when this verb's flags are built
+    from depthq.labellers.labeller import LabellerConfig  # torch: when this verb's flags are built
 
     p.add_argument("--out", type=Path, required=True, help="labeller folder (created; a finished one kept)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.train.labeller import CAMERA_METHODS, LabellerConfig, read_record, train_labeller
+    from depthq.labellers.labeller import CAMERA_METHODS, LabellerConfig, read_record, train_labeller
 
     config = config_from_args(LabellerConfig, args)
     out = train_labeller(config, args.out, progress=not args.no_progress, device=args.device)

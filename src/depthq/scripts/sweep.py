@@ -55,8 +55,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     # MuJoCo and torch (pipeline.sweep reads sim.world's decision rate): when this verb runs.
     from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.runner import run_sweep
     from depthq.pipeline.sweep import parse_ints, parse_setting, retarget, widened
-    from depthq.report.reproduce import run_sweep
+    from depthq.report.build import build_report
 
     base = get_preset(args.preset)
     given = vars(args)
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     runs = given.get("runs")
     widened_ = bool(changes) or runs is not None or target != base
     sweep = widened(target, runs, name=f"{base.name} sweep" if widened_ else base.name, **changes)
-    times = run_sweep(sweep, args.out, device=args.device, executor=executor_from(args))
+    times = run_sweep(sweep, args.out, device=args.device, executor=executor_from(args), finish=build_report)
     models = len({m.name for m in sweep.models()})
     print(f"{sweep.name}: {models} models, {sum(times.values()) / 60:.1f} min of stage time in all; "
           f"tables and report in {args.out}")

@@ -19,7 +19,7 @@ from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
 # under-trains it in our 40-epoch budget (the paper ran up to 1000): on 500 runs of the 4 Hz paper
 # dataset, seed 0, its validation loss (BCE over all validation samples) is 0.145 at 0.01 and 0.112
 # at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1
-# (`python -m depthq.experiments.val_choices`).
+# (`python -m research.val_choices`).
 # Hence 0.1 for both.
 DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is

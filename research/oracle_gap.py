@@ -2,21 +2,23 @@
 Coll-Q-Net, in the hard family's `val` canyons; and each model's agreement with the one-step oracle
 along its own runs.
 
-    python -m depthq.experiments.oracle_gap run OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
-    python -m depthq.experiments.oracle_gap table OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
-    python -m depthq.experiments.oracle_gap predicts OUT [--figure PATH]
-    python -m depthq.experiments.oracle_gap where OUT [--figure PATH]
-    python -m depthq.experiments.oracle_gap dead MODEL[,MODEL…]
-    python -m depthq.experiments.oracle_gap paired SWEEP [--seeds 0,1,2] [--sizes 200,500]
+    python -m research.oracle_gap run OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
+    python -m research.oracle_gap table OUT [--seeds 0,1] [--sizes 500] [--only TEXT]
+    python -m research.oracle_gap predicts OUT [--figure PATH]
+    python -m research.oracle_gap where OUT [--figure PATH]
+    python -m research.oracle_gap dead MODEL[,MODEL…]
 
 `run` runs (or resumes) one `depthq sweep` per candidate into OUT, all sharing OUT's dataset, then
 measures the agreement of every finished evaluation (OUT/agreement.json, kept: an evaluation is
 measured once); `table` prints the Markdown table of what has finished; `predicts` how well each of
 the diagnostic's measures predicts driving across all of them, `where` which states, actions and
 bins each model gets wrong (each with a figure); `dead` which bins a checkpoint predicts as 0 always.
-The `eval` canyons are never driven here. `paired` reads any sweep folder of both networks (e.g. a
-preset's Table I in the `eval` canyons) and compares them seed by seed; with `--claim ID` it writes
-that as the claim's evidence in docs/findings.json.
+The `eval` canyons are never driven here. The paired comparison of both networks in a sweep folder
+is `python -m depthq.report.paired`.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/oracle_gap.md came from the code of commit 0471132 (2026-11-26: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -39,26 +41,21 @@ import torch
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.experiments.cells import mean_interval, ranks_driving
-from depthq.experiments.cli import guarded
 from depthq.nets.checkpoint import load_qnet
-from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (
-    Settings,
     Sweep,
-    Variant,
-    differing,
     parse_ints,
     parse_setting,
     retarget,
     widened,
 )
-from depthq.report.findings import FINDINGS, Evidence, record_evidence
-from depthq.report.reproduce import run_sweep
+from depthq.report.build import build_report
+from depthq.report.cells import mean_interval, ranks_driving
 from depthq.train.features import load_features
 
 
@@ -143,7 +140,7 @@ def run(out: Path, setup: Setup, candidates: tuple[Candidate, ...] = CANDIDATES)
     for seed in setup.seeds:
         for candidate in candidates:
             print(f"{out}: {candidate.name}, seed {seed}", flush=True)
-            run_sweep(sweep_of(setup, candidate, (seed,)), out)
+            run_sweep(sweep_of(setup, candidate, (seed,)), out, finish=build_report)
             measure(out, setup, (candidate,))
     print(table(out, setup, candidates))
     return 0
@@ -404,113 +401,24 @@ def compare(named: list[tuple[str, Path]]) -> str:
     return "\n".join(lines)
 
 
-PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {net}_n{n}_s{seed}…)
-PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
-          ("closest mean (m)", "closest_mean", ".2f"))
-
-
-def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-                   variant: Variant = ()) -> dict[int, dict[int, list[dict[str, Any]]]]:
-    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary; of the
-    sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
-    results: dict[int, dict[int, list[dict[str, Any]]]] = {}
-    differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
-    for n in sizes:
-        for seed in seeds:
-            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed, model=model_name(
-                net, n, seed, differs[net])) / "summary.json" for net in ("coll", "depth")]
-            if all(f.is_file() for f in found):
-                results.setdefault(n, {})[seed] = [json.loads(f.read_text())["summary"] for f in found]
-    return results
-
-
-def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[float], ...]:
-    """Coll-Q-Net's and Depth-Q-Net's `key` per seed, and their difference (Depth − Coll)."""
-    coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
-    return coll, depth, [d - c for c, d in zip(coll, depth, strict=True)]
-
-
-def _sweep_train(sweep: Path) -> Settings:
-    """The training settings every model of a sweep folder has (its setup's, as `Sweep.train`); none
-    for a folder of evaluations alone (no reproduce.json, e.g. models driven in fresh canyons)."""
-    marker = Path(sweep) / "reproduce.json"
-    if not Path(sweep).is_dir():
-        raise ConfigError(f"{sweep}: no such folder")
-    if not marker.is_file():
-        return ()
-    setup = read_json(marker)["sweep"]
-    keys = ("epochs", "train_batches", "val_batches")
-    return tuple((k, setup[k]) for k in keys if setup.get(k) is not None)
-
-
-def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-           variant: Variant = ()) -> str:
-    """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
-    of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
-    trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
-    out of their row. `pattern` names a model's evaluation folder under `sweep`; `variant`: the
-    sweep's models in it."""
-    lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
-             "|---|---|---|---|---|---|"]
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
-        for label, key, fmt in PAIRED:
-            cells = [mean_interval(v, fmt) for v in _columns(both, key)]
-            lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
-
-
-def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
-                    pattern: str = PATTERN, variant: Variant = ()) -> dict[str, str]:
-    """The paired comparison in words, one sentence per size, keyed by where it was measured
-    ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
-    marker = Path(sweep) / "reproduce.json"
-    if not marker.is_file():
-        raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json), so it names no canyons to claim")
-    record = read_json(marker)["sweep"]
-    out = {}
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
-        coll, depth, diff = _columns(both, "distance_to_collision_mean")
-        ahead = sum(d > 0 for d in diff)
-        key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
-        out[key] = (f"to the first collision Depth-Q-Net {mean_interval(depth, '.2f')} m, Coll-Q-Net "
-                    f"{mean_interval(coll, '.2f')} m; Depth-Q-Net ahead in {ahead} of {len(diff)} seeds "
-                    f"(paired difference {mean_interval(diff, '.2f')} m)")
-    return out
-
-
-def _one(key: str, values: tuple[Any, ...]) -> Any:
-    if len(values) != 1:
-        raise ConfigError(f"--set {key}: one value here, got {len(values)}")
-    return values[0]
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m depthq.experiments.oracle_gap", description=__doc__.split("\n")[0]
+        prog="python -m research.oracle_gap", description=__doc__.split("\n")[0]
     )
-    parser.add_argument("action", choices=("run", "table", "predicts", "where", "dead", "compare", "paired"))
-    parser.add_argument("out", help="the sweep folder the candidates share (paired: any sweep folder of "
-                                    "both networks); compare: NAME=EVAL,NAME=EVAL,…; dead: MODEL,MODEL,…")
+    parser.add_argument("action", choices=("run", "table", "predicts", "where", "dead", "compare"))
+    parser.add_argument("out", help="the sweep folder the candidates share; compare: NAME=EVAL,NAME=EVAL,…; "
+                                    "dead: MODEL,MODEL,…")
     parser.add_argument("--seeds", default="0", help="training seeds, e.g. 0,1")
     parser.add_argument("--sizes", default="500", help="training runs, e.g. 200,500")
     parser.add_argument("--only", default="",
                         help="run, table: only the candidates whose name contains this text")
-    parser.add_argument("--pattern", default=PATTERN,
-                        help="paired: a model's evaluation folder under OUT, from {model} (the sweep's "
-                             "folder name), {net}, {n} and {seed}")
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                        help="paired: the sweep's models of this variant, as `depthq sweep --set` gave it "
-                             "(one value each; repeatable)")
     parser.add_argument("--figure", type=Path,
                         help="predicts, where: the figure (default OUT/diagnostics.png, OUT/where.png)")
-    parser.add_argument("--claim", help="paired: write the comparison as evidence of this claim of the "
-                                        "findings file (e.g. table-i), one entry per size")
-    parser.add_argument("--findings", type=Path, default=FINDINGS, help="paired --claim: the findings file")
     args = parser.parse_args(argv)
-    return guarded(f"python -m depthq.experiments.oracle_gap {args.action}", lambda: _act(args, argv))
+    return guarded(f"python -m research.oracle_gap {args.action}", lambda: _act(args))
 
 
-def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
+def _act(args: argparse.Namespace) -> int:
     if args.action == "dead":
         for folder in args.out.split(","):
             print(f"{folder}: bins predicted 0 for every action on {DEAD_FRAMES} frames: "
@@ -522,16 +430,6 @@ def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
         return 0
     args.out = Path(args.out)
     setup = Setup(seeds=parse_ints(args.seeds, "--seeds"), sizes=parse_ints(args.sizes, "--sizes"))
-    if args.action == "paired":
-        variant = tuple((key, _one(key, values)) for key, values in map(parse_setting, args.set))
-        print(paired(args.out, setup.sizes, setup.seeds, args.pattern, variant))
-        if args.claim:
-            command = "python -m depthq.experiments.oracle_gap " + " ".join(argv or sys.argv[1:])
-            for key, text in paired_evidence(args.out, setup.sizes, setup.seeds, args.pattern,
-                                             variant).items():
-                record_evidence(args.claim, key, Evidence(text, command), args.findings)
-                print(f"{args.findings}: claim {args.claim}, {key}: {text}")
-        return 0
     candidates = tuple(c for c in CANDIDATES if args.only in c.name)
     if not candidates:
         raise ConfigError(f"--only {args.only!r}: no candidate's name contains it")

@@ -4,11 +4,15 @@ against Coll-Q-Net in the hard family's 20 `eval` canyons, 3 seeds, with 95 % in
     depthq sweep --preset hard --out runs/hard-eval                       # Table I: K = 1 and Coll-Q-Net
     depthq sweep --preset hard --nets depth --sizes 200,500 --seeds 0,1,2 \\
         --set lookahead=3 --out runs/hard-eval-look                       # the lookahead Depth-Q-Net
-    python -m depthq.experiments.lookahead runs/hard-eval runs/hard-eval-look   # this table, as markdown
+    python -m research.lookahead runs/hard-eval runs/hard-eval-look   # this table, as markdown
 
 K = 3 and its selection rule (the discounted mean) were chosen on `hard/val` canyons
 (docs/ablation.md#lookahead); the `eval` canyons only measure the choice. The last rows pair the
 two Depth-Q-Nets by seed (same data, same canyons): the interval of their difference.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/ablation.md#lookahead-eval came from the code of commit 8671b70 (2026-11-23: the last change of
+that page's tables).
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from depthq.experiments.cells import evaluation_summary, mean_interval
+from depthq.report.cells import evaluation_summary, mean_interval
 
 SIZES, SEEDS, K = (200, 500), (0, 1, 2), 3
 NETS = (  # label, folder argument index, model name pattern
@@ -57,7 +61,7 @@ def table(folders: tuple[Path, Path], sizes: tuple[int, ...] = SIZES, seeds: tup
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.lookahead",
+    parser = argparse.ArgumentParser(prog="python -m research.lookahead",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("one_step", type=Path,
                         help="the sweep folder of Coll-Q-Net and the one-step Depth-Q-Net")

@@ -6,10 +6,14 @@ rows below are never searched), so an obstacle there reads at least that far: a 
 construction. An obstacle it takes for floor reads as whatever lies behind it: an unbounded one. This
 tells the two apart on a labelled dataset's runs, in the canyons they were collected in.
 
-    python -m depthq.experiments.label_misses DATA [--split val] [--near 0.5] [--json OUT.json]
+    python -m research.label_misses DATA [--split val] [--near 0.5] [--json OUT.json]
 
 DATA is a dataset with camera labels (`depthq label DATA --from camera`) collected in simulated
 canyons (a robot's recording has none to re-simulate).
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/results.md came from the code of commit 98b6acc (2026-11-26: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -23,15 +27,14 @@ import numpy as np
 
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
-from depthq.experiments.cli import guarded
-from depthq.experiments.truth import canyon
+from depthq.errors import ConfigError, guarded
+from depthq.labellers.labeller import LabellerConfig, bin_geometry
 from depthq.sim.canyon import FAMILIES, CanyonId, generate_canyon
 from depthq.sim.mjcf import RobotConfig
 from depthq.sim.sensors import BinConfig
-from depthq.train.labeller import LabellerConfig, bin_geometry
+from research.truth import canyon
 
-PROG = "python -m depthq.experiments.label_misses"
+PROG = "python -m research.label_misses"
 KINDS = ("pillar", "wall")
 PILLAR_MARGIN = 0.05  # m beyond a pillar's radius that a hit still counts as the pillar's (range noise)
 # m: the floor labeller's default nearest reading (no obstacle is searched nearer)

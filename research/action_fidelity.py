@@ -1,10 +1,10 @@
 """Does a Depth-Q-Net rank the actions as the simulator would? Measured on validation frames only.
 
-    python -m depthq.experiments.action_fidelity CHECKPOINT [CHECKPOINT ...]
+    python -m research.action_fidelity CHECKPOINT [CHECKPOINT ...]
 
 For every validation frame of the checkpoint's dataset (its stored pose, its `val` canyon in the
 dataset's own family), the simulator gives the true next bins for each of −1, 0, +1 (noise-free,
-one decision period at the data's rate: `depthq.experiments.truth`); the network gives its
+one decision period at the data's rate: `research.truth`); the network gives its
 predictions from the frame's cached feature. Printed per checkpoint:
 
 - L1 of the predicted bins against the true ones (near bins only), per action;
@@ -16,6 +16,10 @@ predictions from the frame's cached feature. Printed per checkpoint:
 
 A network whose L1 is good but whose spread is small and agreement near chance has learned the
 scene, not the effect of its action: that is what limits the policy, not the depth itself.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/val_choices.md came from the code of commit b1f0d44 (2026-11-22: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -32,10 +36,10 @@ from depthq.configio import from_dict
 from depthq.control.action_selection import ACTIONS, depth_scores
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
-from depthq.experiments.truth import next_bins
 from depthq.nets.checkpoint import load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
+from research.truth import next_bins
 
 
 def fidelity(checkpoint: Path, truth_cache: dict | None = None) -> dict[str, Any]:
@@ -69,7 +73,7 @@ def fidelity(checkpoint: Path, truth_cache: dict | None = None) -> dict[str, Any
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.action_fidelity",
+    parser = argparse.ArgumentParser(prog="python -m research.action_fidelity",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("checkpoints", type=Path, nargs="+", help="Depth-Q-Net checkpoint folders")
     args = parser.parse_args(argv)

@@ -4,16 +4,20 @@ canyons beside its validation loss and its agreement with the one-step oracle al
 Asks where, between the default's 40 epochs and the paper's 200, the driving turns, and what changes
 with it.
 
-    python -m depthq.experiments.training_length run OUT [--seeds 0] [--epochs 200] \\
+    python -m research.training_length run OUT [--seeds 0] [--epochs 200] \\
         [--snapshots 20,40,80,120,160] [--net depth] [--average] [--figure PATH]
 
-OUT is a `python -m depthq.experiments.oracle_gap run` folder (its dataset and canyons; the training is
+OUT is a `python -m research.oracle_gap run` folder (its dataset and canyons; the training is
 its sweep's, `--set epochs=… --set snapshots=…`). The final weights are the sweep's own evaluation
 (OUT/eval/<model>), each snapshot's is OUT/eval/<model>_epoch<N>; the agreements go to
 OUT/training_length.json (each evaluation measured once). `--average` drives the mean of those weights
 too (OUT/models/<model>_mean, Polyak averaging after the fact). It prints one row per seed and epoch, then
 how well the validation loss and each diagnostic rank the points' driving (Spearman's ρ). The `eval`
 canyons are never driven here.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/hard_canyons.md#training-length came from the code of commit e9c1943 (2026-11-26: the last change
+of that page's tables).
 """
 
 from __future__ import annotations
@@ -33,13 +37,10 @@ import matplotlib.pyplot as plt
 import torch
 
 from depthq.configio import atomic_write_bytes, read_json, write_json
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import measure_agreement
-from depthq.experiments.cells import evaluation_summary, ranks_driving
-from depthq.experiments.cli import guarded
-from depthq.experiments.oracle_gap import Candidate, Setup, sweep_of
 from depthq.nets.checkpoint import (
     chosen_weights,
     read_config,
@@ -50,11 +51,14 @@ from depthq.nets.checkpoint import (
     weights_stem,
     write_sidecar,
 )
+from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints
-from depthq.report.reproduce import run_sweep
+from depthq.report.build import build_report
+from depthq.report.cells import evaluation_summary, ranks_driving
 from depthq.train.folder import METRICS
+from research.oracle_gap import Candidate, Setup, sweep_of
 
-PROG = "python -m depthq.experiments.training_length"
+PROG = "python -m research.training_length"
 MEASURED = "training_length.json"
 COLUMNS = (  # the table's diagnostics: title, key of the agreement summary, format
     ("agrees, decisive", "agreement_decisive", ".0%"),
@@ -116,7 +120,7 @@ def run(out: Path, setup: Setup, epochs: int, snapshots: tuple[int, ...], net: s
     measured: dict[str, Any] = read_json(path) if path.is_file() else {}
     for seed in setup.seeds:
         sweep = sweep_of(setup, chosen, (seed,))
-        run_sweep(sweep, out)  # the training and its final weights' evaluation
+        run_sweep(sweep, out, finish=build_report)  # the training and its final weights' evaluation
         (model,) = (m.name for m in sweep.models())
         for epoch, name, weights in _points(model, epochs, snapshots, average):
             folder = out / "eval" / name

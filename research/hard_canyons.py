@@ -1,6 +1,6 @@
 """Calibration of the hard canyon family on `val` canyons only (docs/hard_canyons.md).
 
-    python -m depthq.experiments.hard_canyons [OUT]   # the table, and OUT/hard_canyons.png (default docs/)
+    python -m research.hard_canyons [OUT]   # the table, and OUT/hard_canyons.png (default docs/)
 
 For each candidate generator config (narrower → curvier → more pillars), without a camera (only the
 LiDAR decides, as `depthq.evaluate.probe` does):
@@ -11,6 +11,10 @@ LiDAR decides, as `depthq.evaluate.probe` does):
   (seed 0): how long runs are, how many reach `min_frames`, how many end in a bump or at the end.
 
 The hard family is the hardest candidate whose heuristic still passes >= 19 of the 20 val canyons.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/hard_canyons.md#calibration-val-canyons-only came from the code of commit a544130 (2026-11-23: the
+last change of that page's tables).
 """
 
 from __future__ import annotations
@@ -154,7 +158,7 @@ def picture(runs: list[dict], canyon: CanyonConfig, path: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.hard_canyons",
+    parser = argparse.ArgumentParser(prog="python -m research.hard_canyons",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("out", type=Path, nargs="?", default=Path("docs"),
                         help="the folder for hard_canyons.png (default: docs, run from the repository root)")

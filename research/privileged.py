@@ -8,10 +8,14 @@ Input `camera` closes the loop: a perception head learns the current frame's 26 
 image feature (the LiDAR of the same frame as its target: no collision label), and the `bins` net's
 head, trained on the true bins, acts on its estimate, so the policy needs the camera alone.
 
-    python -m depthq.experiments.privileged run DATA OUT [--inputs bins,scan] [--nets depth,coll]
+    python -m research.privileged run DATA OUT [--inputs bins,scan] [--nets depth,coll]
 
 DATA is a dataset folder (`depthq collect`), OUT gets results.json; driven in the family's `val`
 canyons (never `eval`), without a camera.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/oracle_gap.md#privileged came from the code of commit 730cc4c (2026-11-25: the last change of that
+page's tables).
 """
 
 from __future__ import annotations
@@ -189,7 +193,7 @@ def table(folders: list[Path]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.privileged",
+    parser = argparse.ArgumentParser(prog="python -m research.privileged",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("action", choices=("run", "table"))
     parser.add_argument("data", type=Path, help="run: a dataset folder; table: a results folder")

@@ -6,7 +6,7 @@ frozen default trunk's feature → FC hidden + ReLU → FC 26, the read-out of t
 (an invalid bin as the 2 m clip, as that head's perception target). It used a depth sensor, elsewhere:
 no depth of the canyons it labels. Applied to a dataset (`depthq label`), it writes every frame's 26
 bins, clipped to [0, 2] m, into the run files (`depthq.data.camera_labels`). The floor labeller
-(`depthq.train.floor`) and the monodepth labeller (`depthq.train.monodepth`) learn from the camera and
+(`depthq.labellers.floor`) and the monodepth labeller (`depthq.labellers.monodepth`) learn from the camera and
 odometry alone instead; their folders have the same files, with their own settings (docs/formats.md).
 
 Its folder (written by `depthq labeller`):
@@ -49,6 +49,7 @@ from depthq.data.run import Run
 from depthq.data.runfile import RunReader
 from depthq.data.views import run_then_frame
 from depthq.errors import ConfigError, DataError
+from depthq.labellers import floor, monodepth
 from depthq.nets.checkpoint import DIGEST, read_weights, weights_bytes
 from depthq.nets.device import resolve_device
 from depthq.nets.losses import DEPTH_CLIP
@@ -56,7 +57,6 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
 from depthq.sim.sensors import BinConfig
-from depthq.train import floor, monodepth
 from depthq.train.features import BATCH, FeatureTable, load_features
 
 FORMAT = "depthq-labeller"

@@ -1,11 +1,15 @@
 """The design choices of issue #10, measured on validation data and `val` canyons only (docs/val_choices.md).
 
-    python -m depthq.experiments.val_choices runs/paper/data runs/val-choices [variant ...]
+    python -m research.val_choices runs/paper/data runs/val-choices [variant ...]
 
 Trains each variant (a Depth-Q-Net or Coll-Q-Net on the first n runs of the dataset, seed 0, with
 some TrainConfig fields changed) and drives it in the 20 canyons val:1000-1019, which no dataset
 and no evaluation table uses. Prints (and writes to OUT/val_choices.md) one row per variant:
 validation loss, successes, mean distance, how runs ended. Finished variants are reused.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/val_choices.md came from the code of commit 5a1fe2f (2026-11-23: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -122,7 +126,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.val_choices",
+    parser = argparse.ArgumentParser(prog="python -m research.val_choices",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("data", type=Path, help="the dataset folder the variants train on")
     parser.add_argument("out", type=Path,

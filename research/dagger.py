@@ -4,9 +4,9 @@ is, by the depth that follows (no collision needed), aggregated with the explora
 baseline's number of training runs; the other network is offered the same aggregate. With `--net
 coll` Coll-Q-Net drives its own rounds (its label needs the collisions its runs end in).
 
-    python -m depthq.experiments.dagger run OUT --base DATA [--net depth] [--seeds 0,1] [--rounds 2]
-    python -m depthq.experiments.dagger table OUT [--net depth] [--seeds 0,1] [--baseline SWEEP]
-    python -m depthq.experiments.dagger stats OUT [--seeds 0,1]
+    python -m research.dagger run OUT --base DATA [--net depth] [--seeds 0,1] [--rounds 2]
+    python -m research.dagger table OUT [--net depth] [--seeds 0,1] [--baseline SWEEP]
+    python -m research.dagger stats OUT [--seeds 0,1]
 
 With `runs` = N training runs in all and R rounds of M runs, round 0 is the network trained on the
 base's first N − R·M usable runs; round r drives the next training canyons (from the one after round
@@ -23,6 +23,10 @@ far: as many usable runs as the baseline's. Layout of OUT:
 
 Every step resumes: a dataset's runs are recorded one by one, a training from its last epoch, an
 evaluation is kept once its summary is written. The `eval` canyons are never driven here.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/oracle_gap.md#dagger came from the code of commit a77c1cf (2026-11-26: the last change of that
+page's tables).
 """
 
 from __future__ import annotations
@@ -42,13 +46,12 @@ from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
 from depthq.data.subsets import select_runs
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate
-from depthq.experiments.cells import evaluation_summary, mean_interval
-from depthq.experiments.cli import guarded
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import Model, Sweep, parse_ints, retarget, widened
 from depthq.policies.registry import make_policy
+from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.sim.env import CanyonEnv
 from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
@@ -242,7 +245,7 @@ def stats(out: Path, setup: Setup) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.dagger",
+    parser = argparse.ArgumentParser(prog="python -m research.dagger",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("action", choices=("run", "table", "stats"))
     parser.add_argument("out", type=Path, help="the experiment's folder")
@@ -277,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
         print(table(args.out, setup, args.baseline))
         return 0
 
-    return guarded(f"python -m depthq.experiments.dagger {args.action}", act)
+    return guarded(f"python -m research.dagger {args.action}", act)
 
 
 if __name__ == "__main__":

@@ -3,11 +3,15 @@ the camera labels of a `camera_labels` experiment with the LiDAR's bins put in w
 nearer than `split` m ("near") or not nearer ("far"), a Depth-Q-Net trained on each mix as on the camera
 labels, driven in the same canyons. A diagnostic: its labels use the LiDAR, no labeller would.
 
-    python -m depthq.experiments.label_bands run OUT --band near|far [--split 1.0] [--seeds 0]
+    python -m research.label_bands run OUT --band near|far [--split 1.0] [--seeds 0]
 
 OUT is a `python -m depthq.experiments.camera_labels run` folder (its floor labels, setup and sweep);
 this writes OUT/bands/<band>_<split>/data (OUT/floor/data hard-linked, its labels replaced), models/
 and eval/, as the camera-label experiment lays them out, and prints that experiment's rows for them.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/results.md came from the code of commit 05758a2 (2026-11-26: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ from tqdm import tqdm
 from depthq.configio import read_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, guarded
 from depthq.experiments.camera_labels import (
     SUMMARY,
     camera_config,
@@ -33,13 +37,12 @@ from depthq.experiments.camera_labels import (
     parse_settings,
     read_setup,
 )
-from depthq.experiments.cells import mean_interval
-from depthq.experiments.cli import guarded
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.sweep import parse_ints
+from depthq.report.cells import mean_interval
 from depthq.train.trainer import train
 
-PROG = "python -m depthq.experiments.label_bands"
+PROG = "python -m research.label_bands"
 BANDS = ("near", "far")
 NAME = "floor+lidar"  # the mixed labels' labeller name: not a labeller's
 

@@ -1,10 +1,14 @@
 """Would a policy decide in bf16? Its decisions and time under bfloat16 autocast against float32.
 
-    python -m depthq.experiments.precision CHECKPOINT [CHECKPOINT ...]
+    python -m research.precision CHECKPOINT [CHECKPOINT ...]
 
 On up to 1000 frames of the checkpoint's dataset's validation runs (every other frame of its first
 40 runs), one torch thread, one frame per decision: the share of decisions bf16 changes, and ms per
 decision in each precision (the best of two passes each, taken in turns). docs/benchmarks.md#precision.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/benchmarks.md#precision came from the code of commit 6c50adb (2026-11-23: the last change of that
+page's tables).
 """
 
 from __future__ import annotations
@@ -63,7 +67,7 @@ def measure(checkpoint: Path, frames: int = FRAMES) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.precision",
+    parser = argparse.ArgumentParser(prog="python -m research.precision",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("checkpoints", type=Path, nargs="+", help="checkpoint folders (`depthq train`)")
     args = parser.parse_args(argv)

@@ -1,7 +1,7 @@
 """The checks behind docs/results.md#before-10 ("What this shows"): why Depth-Q-Net steered towards
 walls on our data.
 
-    python -m depthq.experiments.investigation runs/quick/data
+    python -m research.investigation runs/quick/data
 
 1. sign check: after a saturated left (right) turn, does the next scan's content move right (left)?
 2. one-step oracle (`depthq.evaluate.oracle`): the selection rule with the simulator's true next scan
@@ -9,6 +9,10 @@ walls on our data.
 3. constant baseline: validation L1 of the per-bin median of the training targets.
 4. action effect: the true one-step effect of the action per bin (re-simulated from stored poses in
    the dataset's own canyons) against the slope of next-step depth on the action in the OU data.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/results.md#before-10 came from the code of commit 396f92d (2026-11-23: the last change of that
+page's tables).
 """
 
 from __future__ import annotations
@@ -23,8 +27,8 @@ from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.evaluate.oracle import Oracle, drive_oracle
-from depthq.experiments.truth import next_bins
 from depthq.sim.world import WorldConfig
+from research.truth import next_bins
 
 ORACLE_CANYONS = tuple(f"eval:{k}" for k in range(10))
 
@@ -72,7 +76,7 @@ def action_effects(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.investigation",
+    parser = argparse.ArgumentParser(prog="python -m research.investigation",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("data", type=Path, help="a dataset folder (`depthq collect`)")
     args = parser.parse_args(argv)

@@ -11,7 +11,7 @@ odometry (the canyons stand still): an obstacle the net loses as the robot close
 bottom rows, stays where earlier frames saw it. No depth of any kind goes in: it may label the very
 dataset it learnt from.
 
-Its folder is a labeller folder (`depthq.train.labeller`), `name` "floor".
+Its folder is a labeller folder (`depthq.labellers.labeller`), `name` "floor".
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ floor labeller's memory and bins.
 
 Kornia does the projective geometry (warping by depth), SSIM and the smoothness term.
 
-Its folder is a labeller folder (`depthq.train.labeller`), `name` "monodepth".
+Its folder is a labeller folder (`depthq.labellers.labeller`), `name` "monodepth".
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from tqdm import tqdm
 
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import DataError
-from depthq.train.floor import BATCH, Geometry, ReadingsEstimate, reduce
+from depthq.labellers.floor import BATCH, Geometry, ReadingsEstimate, reduce
 
 # The depth net's channels per level, in multiples of its width: its encoder halves the frame's size at
 # each level, and each decoder level gives a disparity, at 1, 1/2, 1/4, 1/8 of the size (Monodepth2's).

@@ -2,11 +2,15 @@
 monodepth labeller at several memory lengths (`LabellerConfig.memory_s`), each rated against the LiDAR
 as `depthq dataset stats` rates labels (nearest bin, distance bands). Choose on `val` runs.
 
-    python -m depthq.experiments.label_memory LABELLER DATA [--memory 0,0.5,1,2,4] [--split val]
+    python -m research.label_memory LABELLER DATA [--memory 0,0.5,1,2,4] [--split val]
 
 LABELLER is a floor or monodepth labeller folder (`depthq labeller --method floor|monodepth`); DATA a
 simulated dataset of its camera (its LiDAR is the truth here; nothing is written into it). Each frame's
 own readings are computed once; only the memory differs between the rows.
+
+A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
+docs/results.md came from the code of commit 98b6acc (2026-11-26: the last change of that page's
+tables).
 """
 
 from __future__ import annotations
@@ -22,12 +26,11 @@ from tqdm import tqdm
 from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.data.stats import label_errors
-from depthq.errors import ConfigError
-from depthq.experiments.cli import guarded
-from depthq.train import floor
-from depthq.train.labeller import check_applicable, load_labeller
+from depthq.errors import ConfigError, guarded
+from depthq.labellers import floor
+from depthq.labellers.labeller import check_applicable, load_labeller
 
-PROG = "python -m depthq.experiments.label_memory"
+PROG = "python -m research.label_memory"
 
 
 def measure(labeller: Path, dataset: Dataset, memories: tuple[float, ...], split: str = "val",
