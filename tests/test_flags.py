@@ -112,6 +112,33 @@ def test_train_help_lists_nested_fields_as_dotted_flags(capsys: pytest.CaptureFi
         assert flag in out, flag
 
 
+def test_train_help_lists_the_choices_of_every_choice_valued_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """Each choice-valued setting is a Literal whose choices come from what owns them (the trunks'
+    registry, the losses, the head forms, ...): --help lists them, and a value outside them is refused
+    by name, exit 2, on the command line as in a config built otherwise."""
+    from depthq.cli import main
+    from depthq.errors import ConfigError
+    from depthq.nets.checkpoint import WEIGHTS
+    from depthq.nets.heads import HEAD_FORMS
+    from depthq.nets.losses import DEPTH_LOSSES
+    from depthq.nets.trunk import TRUNKS
+    from depthq.train.config import PRECISIONS, TrainConfig
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    out = capsys.readouterr().out
+    for flag, choices in (("--trunk", tuple(TRUNKS)), ("--depth-loss", DEPTH_LOSSES),
+                          ("--head-form", (*HEAD_FORMS, "none")), ("--labels", ("lidar", "camera")),
+                          ("--weights", (*WEIGHTS, "none")), ("--precision", PRECISIONS)):
+        assert f"{flag} {{{','.join(choices)}}}" in out, flag
+    for flag, field in (("--trunk", "trunk"), ("--depth-loss", "depth_loss"), ("--precision", "precision")):
+        with pytest.raises(SystemExit) as exit_:
+            main(["train", "--model", "depth", "--data", "d", "--out", "o", flag, "nonesuch"])
+        assert exit_.value.code == 2 and "got 'nonesuch'" in capsys.readouterr().err
+        with pytest.raises(ConfigError, match=rf"train\.{field} must be one of .*, got 'nonesuch'"):
+            TrainConfig(model="depth", data="d", **{field: "nonesuch"})
+
+
 def _train(argv: list[str]):
     from depthq.train.config import TrainConfig
 

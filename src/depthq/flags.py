@@ -30,6 +30,7 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
+from depthq.configio import choices
 from depthq.errors import ConfigError
 
 T = TypeVar("T")
@@ -250,8 +251,9 @@ def _show(value: Any) -> str:
 
 
 def _metavar(hint: Any, name: str) -> str | None:
-    if typing.get_origin(hint) is Literal:
-        return "{" + ",".join(map(str, typing.get_args(hint))) + "}"
+    options = choices(hint)
+    if options is not None:  # a choice-valued field lists its choices ("none" last where it may be unset)
+        return "{" + ",".join(_show(o) for o in options) + "}"
     if typing.get_origin(hint) is tuple:
         return f"{name.upper()}[,...]"
     return name.upper()
