@@ -204,6 +204,40 @@ def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
     assert sweep.train_config(sweep.models()[0], "d").samples.horizon == 2
 
 
+def test_sweep_settings_parse_as_the_train_flags_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--set parses each value through the flags' own parser: lr=none is `depthq train --lr none`, a
+    choice outside a Literal's is refused naming it (exit 2, nothing written), and a Depth-Q-Net-only
+    setting (depth_loss) gives each Coll-Q-Net one model under its own name, not one per value."""
+    from depthq.cli import main
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting, widened
+    from depthq.train.config import TrainConfig
+
+    assert parse_setting("lr=none,0.1") == ("lr", (None, 0.1))
+    assert parse_setting("dropout=0,0.5") == ("dropout", (0.0, 0.5))
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("lr=none"),))
+    args = build_parser("train").parse_args(["train", "--model", "depth", "--data", "d", "--out", "o",
+                                             "--lr", "none"])
+    model = sweep.models()[0]
+    assert model.name == "depth_n3_s0"  # the preset's own model: lr none is the default
+    assert sweep.train_config(model, "d") == config_from_args(
+        TrainConfig, args, **{**dict(sweep.train), "runs": 3, "seed": 0})
+    for setting, named in (("trunk=nonesuch", "'nonesuch'"), ("depth_loss=original,l2", "'l2'"),
+                           ("lr=fast", "'fast'"), ("head_form=concat,none,wide", "'wide'")):
+        assert main(["sweep", "--preset", "smoke", "--set", setting, "--out", str(tmp_path / "s")]) == 2
+        err = capsys.readouterr().err
+        assert f"--set {setting.partition('=')[0]}" in err and named in err, err
+    assert not (tmp_path / "s").exists()
+
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("depth_loss=original,relative"),))
+    names = [m.name for m in sweep.models()]
+    assert sorted({n for n in names if n.startswith("coll")}) == ["coll_n3_s0", "coll_n6_s0"]
+    assert sorted({n for n in names if n.startswith("depth")}) == [
+        "depth_n3_s0", "depth_n3_s0_depth_lossrelative", "depth_n6_s0", "depth_n6_s0_depth_lossrelative"]
+
+
 def test_a_variant_names_each_networks_models_by_what_differs_from_its_own_default() -> None:
     """200 epochs, best weights (select=best, the setting's old name): Coll-Q-Net acts with its best
     weights by default, so only its epochs name its folders; Depth-Q-Net's (its weight average by

@@ -132,6 +132,17 @@ def add_config_arguments(
     return flags
 
 
+def parse_value(flag: Flag, text: str, what: str | None = None) -> Any:
+    """`text` as `flag`'s value, parsed as the flag parses it on the command line ('none' for a field
+    that may be unset, one of a Literal's choices, a tuple's items joined by ','): the one parser of a
+    setting given as text, so `depthq sweep --set` takes what the flags take. Else a ConfigError
+    naming `what` (by default the flag) and the value."""
+    try:
+        return _parse(flag.hint, text)
+    except ValueError as err:
+        raise ConfigError(f"{what or flag.name}: {err}") from None
+
+
 def config_from_args(cls: type[T], args: argparse.Namespace, base: T | None = None, **given: Any) -> T:
     """`cls` from the flags `add_config_arguments` made that were given, and `given` (field paths)
     for the fields the verb sets; every other field at its default, or `base`'s when given."""
