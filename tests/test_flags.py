@@ -22,7 +22,7 @@ VERB_CONFIGS = [
     (("evaluate",), "depthq.evaluate.online:EvalConfig", ("canyons",), None),  # --canyons: a canyon set
     (("drive",), "depthq.evaluate.online:EvalConfig", ("canyons", "lockstep"), None),  # --canyon: one
     (("labeller",), "depthq.train.labeller:LabellerConfig", (), None),
-    (("dataset", "stats"), "depthq.data:DataConfig", ("jpeg_quality",), None),  # storage: not a count
+    (("dataset", "stats"), "depthq.data:DataConfig", (), None),
     (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
                                                             "env.world.family")),
     (("probe",), "depthq.sim.world:WorldConfig", (), ("family",)),
@@ -261,11 +261,33 @@ def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> N
     from depthq.data.recorder import CollectConfig
     from depthq.errors import ConfigError
 
-    config = build_config(CollectConfig, {"runs": 3, "env.world.decision_hz": 10.0, "data.horizon": 2})
-    assert (config.runs, config.env.world.decision_hz, config.data.horizon) == (3, 10.0, 2)
+    config = build_config(CollectConfig, {"runs": 3, "env.world.decision_hz": 10.0, "data.min_frames": 30})
+    assert (config.runs, config.env.world.decision_hz, config.data.min_frames) == (3, 10.0, 30)
     assert config.env.world.max_yaw_rate == CollectConfig().env.world.max_yaw_rate  # the enclosing default
     with pytest.raises(ConfigError, match="no setting nothing"):
         build_config(CollectConfig, {"env.nothing": 1})
+
+
+def test_collect_offers_only_what_changes_the_data(capsys: pytest.CaptureFixture[str]) -> None:
+    """A training's sample settings are TrainConfig.samples' alone: collect's --help offers none of
+    them (nor Table II's subsets), and a dataset's manifest written when it held them (before #48)
+    reads without them, so the same collection resumes it."""
+    from depthq.cli import main
+    from depthq.data.labels import SampleConfig
+    from depthq.data.manifest import upgrade_config
+    from depthq.data.recorder import CollectConfig
+
+    with pytest.raises(SystemExit):
+        main(["collect", "--help"])
+    out = capsys.readouterr().out
+    training_only = [f.name for f in dataclasses.fields(SampleConfig) if f.name != "min_frames"]
+    for name in (*training_only, "subsets"):
+        assert f"--data.{name.replace('_', '-')}" not in out and f"--{name.replace('_', '-')} " not in out
+    assert "--data.min-frames" in out and "--data.jpeg-quality" in out
+    recorded = CollectConfig(runs=3).recorded()
+    old = {**recorded, "data": {**recorded["data"], "horizon": 2, "every_run_end": True, "action_clip": 1.0,
+                                "action_lag": 0, "subsets": [50, 100]}}
+    assert upgrade_config(old) == recorded
 
 
 def test_no_setting_is_declared_twice() -> None:
