@@ -20,7 +20,8 @@ from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path, parse_value
-from depthq.pipeline.layout import FOLDER_KEYS, NETS, model_name, setting_text
+from depthq.nets.migrations import RENAMED_SETTINGS
+from depthq.pipeline.layout import NETS, model_name, setting_text
 from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
 from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig
@@ -35,9 +36,6 @@ NOT_IN_GRID = ("model", "data", "runs", "seed")
 # name (and every variant's row shows it), rather than refusing a grid over both networks.
 DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
               "output_bias")
-# Old spellings of renamed or moved settings, accepted by --set for one release: 'select' → 'weights',
-# 'horizon' → 'samples.horizon'.
-RENAMED_SETTINGS = {old: new for new, old in FOLDER_KEYS.items()}
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 

@@ -8,11 +8,12 @@ from pathlib import Path
 from depthq.flags import add_config_arguments, config_from_args, flag_name
 from depthq.nets.checkpoint import read_sidecar
 from depthq.nets.device import DEVICE_HELP
-from depthq.train.config import MOVED_SETTINGS, TrainConfig
+from depthq.nets.migrations import RENAMED_SETTINGS
+from depthq.train.config import TrainConfig
 
 # Older spellings of TrainConfig's flags, accepted for one release: --select, and the sample settings'
 # flat flags from before TrainConfig held them in `samples` (--horizon for --samples.horizon).
-_ALIASES = {"weights": ("--select",), **{path: (flag_name(old),) for old, path in MOVED_SETTINGS.items()}}
+_ALIASES = {path: (flag_name(old),) for old, path in RENAMED_SETTINGS.items()}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

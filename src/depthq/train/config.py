@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import typing
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Literal
 
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
@@ -45,10 +45,6 @@ DepthLoss = Literal[DEPTH_LOSSES]  # type: ignore[valid-type]
 HeadForm = Literal[HEAD_FORMS]  # type: ignore[valid-type]
 LabelSource = Literal[LABEL_SOURCES]  # type: ignore[valid-type]
 Weights = Literal[WEIGHTS]  # type: ignore[valid-type]
-# TrainConfig's settings that moved into its `samples` (#33), by the names they had before: their old
-# flags (--horizon), sweep settings (--set horizon=2) and model folder names (coll_n200_s0_horizon2)
-# still take them, for one release.
-MOVED_SETTINGS = {f.name: f"samples.{f.name}" for f in fields(SampleConfig)}
 
 
 def check_precisions(precisions: tuple[str, ...], what: str) -> None:
