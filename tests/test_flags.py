@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import typing
 from pathlib import Path
 
@@ -98,6 +99,25 @@ def test_every_flag_of_every_verb_says_what_it_does() -> None:
                 helps = shown.get(action.dest, [])
                 assert helps and all(h and h.strip() for h in helps), f"{name}: {action.option_strings} " \
                     f"({action.dest}) has no help"
+
+
+def test_no_flag_says_its_help_twice() -> None:
+    """A flag's help is its field's once: a verb that adds words (`more_help`) adds other words, and no
+    field is a flag twice (`depthq labeller --help` once printed --data's help twice over)."""
+    for verb in VERBS:
+        for name, parser in _all_parsers(_parser((verb,)), verb):
+            dests = [a.dest for a in parser._actions if a.help != argparse.SUPPRESS]
+            assert len(dests) == len(set(dests)), f"{name}: a flag listed twice"
+            for action in parser._actions:
+                parts = [_words(p) for p in str(action.help or "").split(";") if len(_words(p)) >= 4]
+                for i, one in enumerate(parts):
+                    for other in parts[i + 1:]:  # the same words again, however reworded
+                        same = len(one & other) / min(len(one), len(other))
+                        assert same < 0.6, f"{name}: {action.option_strings} says a part twice"
+
+
+def _words(text: str) -> set[str]:
+    return {w for w in re.findall(r"[a-z]+", text.lower()) if len(w) > 3}
 
 
 def test_train_help_lists_nested_fields_as_dotted_flags(capsys: pytest.CaptureFixture[str]) -> None:
