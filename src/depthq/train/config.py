@@ -74,6 +74,8 @@ class TrainConfig:
     (docs/design.md#training).
     `runs` takes the first n usable training runs (the paper's nested subsets); None takes all.
     `lr` None means the paper's rate for `model`; read the effective one from `learning_rate`.
+    Settings whose default depends on other fields (`head_form`, `average`, `weights`; `lr`) are
+    resolved in one place, `_resolve_defaults`.
     """
 
     model: str  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
@@ -171,14 +173,7 @@ class TrainConfig:
         check_seed(self.seed)
         if self.model not in HEAD_KINDS:
             raise ConfigError(f"train.model must be one of {HEAD_KINDS}, got {self.model!r}")
-        # Defaults that depend on other fields are resolved here, so a stored config names its choice.
-        if self.head_form is None and isinstance(self.lookahead, int):
-            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
-        if self.average is None:
-            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
-        if self.weights is None:
-            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(str(self.head_form), "best")
-            object.__setattr__(self, "weights", chosen)
+        self._resolve_defaults()
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
         if self.runs is not None:
@@ -225,6 +220,27 @@ class TrainConfig:
                 f"train.labels {self.labels!r}: Coll-Q-Net learns from the bump, not from depth bins; "
                 "camera labels are Depth-Q-Net's (--model depth), use --labels lidar"
             )
+
+    def _resolve_defaults(self) -> None:
+        """The defaults that depend on other fields, all resolved here (before any check), so that a
+        stored config names its choice:
+
+        - `head_form` none: the network's own for its lookahead (`default_form`: depth_first for a
+          one-step Depth-Q-Net, else concat); the network's, so a network registry supplies it;
+        - `average` none: its head form's (`DEFAULT_AVERAGE`: 0.25 for depth_first), else 0;
+        - `weights` none: average when the training averages, else its head form's
+          (`DEFAULT_WEIGHTS`: final for depth_first), else best.
+
+        `lr` none is the one left unresolved: configs have always stored it as none (model folders
+        are matched on it), and `learning_rate` reads the network's rate (`DEFAULT_LR`), the other
+        default a network registry supplies."""
+        if self.head_form is None and isinstance(self.lookahead, int):
+            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
+        if self.average is None:
+            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
+        if self.weights is None:
+            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(str(self.head_form), "best")
+            object.__setattr__(self, "weights", chosen)
 
     def _check_projection(self) -> None:
         _int_at_least("feature_projection", self.feature_projection, 0)
@@ -288,5 +304,5 @@ class TrainConfig:
 
     @property
     def learning_rate(self) -> float:
-        """The learning rate in use: `lr`, or the paper's for this model."""
+        """The learning rate in use: `lr`, or the network's (`DEFAULT_LR`; see `_resolve_defaults`)."""
         return DEFAULT_LR[self.model] if self.lr is None else float(self.lr)
