@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import warnings
 from pathlib import Path
 
 import pytest
@@ -84,6 +85,27 @@ def test_a_version_3_checkpoint_written_today_reads_as_it_is(tmp_path: Path) -> 
     record = _read("v3", tmp_path)
     assert record == {k: v for k, v in stored.items() if k != "sha256"}
     assert from_dict(TrainConfig, record["train"]).model == _head(record).kind == "coll"
+
+
+def test_a_head_record_without_the_fields_added_since_reads_as_it_did(tmp_path: Path) -> None:
+    """A checkpoint's "head" written before action_scale, lookahead, feature_projection or form (added in
+    that order), or with form "concat" (left out of records until #33), reads as the defaults HeadConfig
+    had then, in a version 1 record and a version 3 one alike."""
+    from depthq.nets.checkpoint import FORMAT
+
+    stored = json.loads((STORED / "checkpoints" / "heads_before_their_fields.json").read_text())
+    for n, case in enumerate(stored["cases"]):
+        for version in (1, FORMAT_VERSION):
+            folder = tmp_path / f"{n}-v{version}"
+            folder.mkdir()
+            (folder / "config.json").write_text(json.dumps({
+                "format": FORMAT, "format_version": version, "train": {"model": "depth", "data": OLD_DATA},
+                "head": case["head"],
+            }))
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", ".*dataset not found")  # a version 1 record's: its rate
+                record = read_config(folder)
+            assert _head(record) == from_dict(HeadConfig, case["reads_as"]), (case["head"], version)
 
 
 def test_sweep_model_folders_keep_the_names_settings_had() -> None:
