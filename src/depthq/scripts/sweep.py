@@ -25,10 +25,10 @@ _HELP = {
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from depthq.data.recorder import CollectConfig  # MuJoCo: only when this verb's flags are built
+    from depthq.pipeline.presets import PRESETS
 
-    p.add_argument(
-        "--preset", default="quick", help="the sweep to start from: smoke, quick, paper, nominal, hard"
-    )
+    p.add_argument("--preset", default="quick", metavar="{" + ",".join(PRESETS) + "}",
+                   help="the sweep to start from (default: quick)")
     p.add_argument(
         "--canyons",
         help="evaluation canyons, e.g. hard/val:1000-1019 to compare settings on val canyons "
