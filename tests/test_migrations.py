@@ -114,7 +114,24 @@ def test_sweep_model_folders_keep_the_names_settings_had() -> None:
     from depthq.pipeline.presets import get_preset
     from depthq.pipeline.sweep import parse_setting, widened
 
-    stored = json.loads((STORED / "sweep_models_before_33.json").read_text())
+    stored = json.loads((STORED / "sweeps" / "models_before_33.json").read_text())
     for spelling in (stored["set"], stored["set_today"]):
         sweep = widened(get_preset("smoke"), grid=tuple(parse_setting(s) for s in spelling))
         assert sorted({m.name for m in sweep.models()}) == stored["models"], spelling
+
+
+def test_a_sweep_folder_written_before_sweeps_is_claimed_by_its_preset(tmp_path: Path) -> None:
+    """Its reproduce.json holds the smoke preset under "preset", without the canyon family (the paper's
+    then): the smoke preset resumes the folder, another family's sweep is refused naming what differs."""
+    from depthq.errors import ConfigError
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.stages import _claim
+    from depthq.pipeline.sweep import retarget
+
+    for name in ("smoke", "hard"):
+        (tmp_path / name).mkdir()
+        shutil.copy(STORED / "sweeps" / "reproduce_before_sweeps.json", tmp_path / name / "reproduce.json")
+    _claim(tmp_path / "smoke", get_preset("smoke"))
+    assert json.loads((tmp_path / "smoke" / "reproduce.json").read_text())["sweep"]["family"] == "paper"
+    with pytest.raises(ConfigError, match=r"family 'paper' there, 'hard' here"):
+        _claim(tmp_path / "hard", retarget(get_preset("smoke"), family="hard"))

@@ -7,6 +7,8 @@ sweeps named model folders after them (docs/formats.md).
     checkpoint_v2   version 2 → 3: config.json describes its policy and its dataset
     checkpoint_v3   version 3 as written before its later fields (0.1.0 is unreleased, so they came
                     without a version): fields added, renamed and moved read as today's
+    sweep_setup     a sweep folder's reproduce.json written before sweeps ("preset") or before a
+                    setting was part of a sweep's setup (`family`)
     RENAMED_SETTINGS, FOLDER_KEYS
                     settings by the names they had: their old flags (--select, --horizon), sweep
                     settings (--set select=final) and the model folders named after them
@@ -24,6 +26,7 @@ from typing import Any
 from depthq.control.action_selection import ACTIONS, RULE_OF
 from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
+from depthq.sim.canyon import PAPER
 
 # What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
 # its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
@@ -56,6 +59,8 @@ RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in 
 # and reuses the folders trained before (`--set weights=final` is depth_n200_s0_selectfinal, as
 # `--set select=final` was; `--set samples.horizon=2` is coll_n200_s0_horizon2).
 FOLDER_KEYS = {new: old for old, new in RENAMED_SETTINGS.items()}
+# What a sweep folder written before a setting was part of a sweep's setup holds for it.
+_SETUP_ADDED = {"family": PAPER}
 
 
 def migrate_checkpoint(record: dict[str, Any], version: int) -> dict[str, Any]:
@@ -124,3 +129,10 @@ def checkpoint_v3(record: dict[str, Any]) -> dict[str, Any]:
     if moved:
         train["samples"] = {**moved, **train.get("samples", {})}
     return {**out, "train": train}
+
+
+def sweep_setup(record: dict[str, Any]) -> dict[str, Any]:
+    """The sweep a folder's reproduce.json records (`depthq.pipeline.sweep.Sweep.record`) in today's
+    shape: under "sweep", or "preset" in a folder written before sweeps; a setup setting it predates
+    (`_SETUP_ADDED`) at the one value there was."""
+    return {**_SETUP_ADDED, **record.get("sweep", record.get("preset", {}))}

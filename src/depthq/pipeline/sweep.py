@@ -22,7 +22,7 @@ from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path, parse_value
 from depthq.nets.migrations import RENAMED_SETTINGS
 from depthq.pipeline.layout import NETS, model_name, setting_text
-from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
+from depthq.sim.canyon import FAMILIES, eval_set, split_family
 from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig
 
@@ -172,10 +172,6 @@ class Sweep:
         grid = {"name": self.name, "subsets": self.subsets, "seeds": self.seeds, "workers": self.workers,
                 "nets": self.nets, "grid": self.grid}
         return {**json.loads(json.dumps(grid)), **self.setup()}
-
-
-# What a folder written before a setting was part of the setup holds for it.
-SETUP_DEFAULTS: dict[str, Any] = {"family": PAPER}
 
 
 def retarget(
