@@ -196,66 +196,6 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert read_json(old / "config.json")["format_version"] == 3
 
 
-def test_a_record_with_the_names_before_33_reads_under_the_new_ones(tmp_path: Path) -> None:
-    """`train.select` (the weights a policy uses by default) reads as `train.weights`, `policy.selection`
-    (the rule that picks an action) as `policy.rule`; a record with both names keeps the new one."""
-    from depthq.nets.checkpoint import FORMAT, chosen_weights, policy_record
-
-    policy = {"decision_hz": 4.0, "frame_size": [308, 410], "actions": [-1, 0, 1], "bins": None}
-    for folder, weights, rule in (("old", {"select": "final"}, {"selection": "farthest_nearest_bin"}),
-                                  ("new", {"weights": "final"}, {"rule": "farthest_nearest_bin"})):
-        (tmp_path / folder).mkdir()
-        (tmp_path / folder / "config.json").write_text(json.dumps({
-            "format": FORMAT, "format_version": FORMAT_VERSION, "train": {"model": "depth", **weights},
-            "policy": {**policy, **rule},
-        }))
-        record = read_config(tmp_path / folder)
-        assert "select" not in record["train"] and chosen_weights(record, None) == "final"
-        assert chosen_weights(record, "best") == "best"
-        assert policy_record(record).rule == "farthest_nearest_bin" and "selection" not in record["policy"]
-
-
-def test_a_head_record_without_the_fields_added_since_reads_as_it_did(tmp_path: Path) -> None:
-    """A checkpoint's "head" written before action_scale, lookahead, feature_projection or form (added in
-    that order), or with form "concat" (left out of records until #33), reads as the defaults HeadConfig
-    had then: HeadConfig has none now (#33), the reader holds them. Version 1 records are the oldest."""
-    from depthq.configio import from_dict
-    from depthq.nets.checkpoint import FORMAT
-    from depthq.nets.heads import HeadConfig
-
-    first = {"kind": "depth", "feature_dim": 1280, "hidden": 4096, "n_bins": 26, "dropout": 0.0}
-    cases = [  # (the fields a record has besides the first checkpoint's, the head it loads as)
-        ({}, HeadConfig("depth", 1280, hidden=4096, dropout=0.0, action_scale=1.0, lookahead=1,
-                        feature_projection=0, form="concat", output_bias=0.0)),
-        ({"action_scale": 10.0}, HeadConfig("depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0,
-                                            lookahead=1, feature_projection=0, form="concat",
-                                            output_bias=0.0)),
-        ({"action_scale": 10.0, "lookahead": 3}, HeadConfig(
-            "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=3, feature_projection=0,
-            form="concat", output_bias=0.0)),
-        ({"action_scale": 10.0, "lookahead": 1, "feature_projection": 256}, HeadConfig(
-            "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=1, feature_projection=256,
-            form="concat", output_bias=0.0)),
-        ({"action_scale": 10.0, "lookahead": 1, "feature_projection": 0, "form": "depth_first"}, HeadConfig(
-            "depth", 1280, hidden=4096, dropout=0.0, action_scale=10.0, lookahead=1, feature_projection=0,
-            form="depth_first", output_bias=0.0)),
-    ]
-    for n, (fields, expected) in enumerate(cases):
-        for version in (1, FORMAT_VERSION):
-            folder = tmp_path / f"{n}-v{version}"
-            folder.mkdir()
-            (folder / "config.json").write_text(json.dumps({
-                "format": FORMAT, "format_version": version, "train": {"model": "depth", "data": "-"},
-                "head": {**first, **fields},
-            }))
-            if version < FORMAT_VERSION:
-                with pytest.warns(UserWarning, match="dataset not found"):
-                    record = read_config(folder)
-            else:
-                record = read_config(folder)
-            assert from_dict(HeadConfig, record["head"]) == expected, (fields, version)
-
-
 @pytest.mark.slow
 def test_weights_final_makes_a_policy_use_the_final_weights(data: Path, tmp_path: Path) -> None:
     # Coll-Q-Net at its default rate over-fits this tiny dataset from the first epoch: best ≠ final.

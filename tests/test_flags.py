@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import typing
 from pathlib import Path
 
@@ -22,7 +23,7 @@ VERB_CONFIGS = [
     (("evaluate",), "depthq.evaluate.online:EvalConfig", ("canyons",), None),  # --canyons: a canyon set
     (("drive",), "depthq.evaluate.online:EvalConfig", ("canyons", "lockstep"), None),  # --canyon: one
     (("labeller",), "depthq.labellers.labeller:LabellerConfig", (), None),
-    (("dataset", "stats"), "depthq.data:DataConfig", ("jpeg_quality",), None),  # storage: not a count
+    (("dataset", "stats"), "depthq.data:DataConfig", (), None),
     (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
                                                             "env.world.family")),
     (("probe",), "depthq.sim.world:WorldConfig", (), ("family",)),
@@ -100,6 +101,25 @@ def test_every_flag_of_every_verb_says_what_it_does() -> None:
                     f"({action.dest}) has no help"
 
 
+def test_no_flag_says_its_help_twice() -> None:
+    """A flag's help is its field's once: a verb that adds words (`more_help`) adds other words, and no
+    field is a flag twice (`depthq labeller --help` once printed --data's help twice over)."""
+    for verb in VERBS:
+        for name, parser in _all_parsers(_parser((verb,)), verb):
+            dests = [a.dest for a in parser._actions if a.help != argparse.SUPPRESS]
+            assert len(dests) == len(set(dests)), f"{name}: a flag listed twice"
+            for action in parser._actions:
+                parts = [_words(p) for p in str(action.help or "").split(";") if len(_words(p)) >= 4]
+                for i, one in enumerate(parts):
+                    for other in parts[i + 1:]:  # the same words again, however reworded
+                        same = len(one & other) / min(len(one), len(other))
+                        assert same < 0.6, f"{name}: {action.option_strings} says a part twice"
+
+
+def _words(text: str) -> set[str]:
+    return {w for w in re.findall(r"[a-z]+", text.lower()) if len(w) > 3}
+
+
 def test_train_help_lists_nested_fields_as_dotted_flags(capsys: pytest.CaptureFixture[str]) -> None:
     from depthq.cli import main
 
@@ -110,6 +130,33 @@ def test_train_help_lists_nested_fields_as_dotted_flags(capsys: pytest.CaptureFi
     for flag in ("--samples.horizon", "--samples.min-frames", "--samples.every-run-end",
                  "--no-samples.every-run-end", "--samples.action-clip", "--samples.action-lag"):
         assert flag in out, flag
+
+
+def test_train_help_lists_the_choices_of_every_choice_valued_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """Each choice-valued setting is a Literal whose choices come from what owns them (the trunks'
+    registry, the losses, the head forms, ...): --help lists them, and a value outside them is refused
+    by name, exit 2, on the command line as in a config built otherwise."""
+    from depthq.cli import main
+    from depthq.errors import ConfigError
+    from depthq.nets.checkpoint import WEIGHTS
+    from depthq.nets.heads import HEAD_FORMS
+    from depthq.nets.losses import DEPTH_LOSSES
+    from depthq.nets.trunk import TRUNKS
+    from depthq.train.config import PRECISIONS, TrainConfig
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    out = capsys.readouterr().out
+    for flag, choices in (("--trunk", tuple(TRUNKS)), ("--depth-loss", DEPTH_LOSSES),
+                          ("--head-form", (*HEAD_FORMS, "none")), ("--labels", ("lidar", "camera")),
+                          ("--weights", (*WEIGHTS, "none")), ("--precision", PRECISIONS)):
+        assert f"{flag} {{{','.join(choices)}}}" in out, flag
+    for flag, field in (("--trunk", "trunk"), ("--depth-loss", "depth_loss"), ("--precision", "precision")):
+        with pytest.raises(SystemExit) as exit_:
+            main(["train", "--model", "depth", "--data", "d", "--out", "o", flag, "nonesuch"])
+        assert exit_.value.code == 2 and "got 'nonesuch'" in capsys.readouterr().err
+        with pytest.raises(ConfigError, match=rf"train\.{field} must be one of .*, got 'nonesuch'"):
+            TrainConfig(model="depth", data="d", **{field: "nonesuch"})
 
 
 def _train(argv: list[str]):
@@ -177,6 +224,40 @@ def test_sweep_settings_take_the_flat_and_the_dotted_names() -> None:
     assert sweep.train_config(sweep.models()[0], "d").samples.horizon == 2
 
 
+def test_sweep_settings_parse_as_the_train_flags_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--set parses each value through the flags' own parser: lr=none is `depthq train --lr none`, a
+    choice outside a Literal's is refused naming it (exit 2, nothing written), and a Depth-Q-Net-only
+    setting (depth_loss) gives each Coll-Q-Net one model under its own name, not one per value."""
+    from depthq.cli import main
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting, widened
+    from depthq.train.config import TrainConfig
+
+    assert parse_setting("lr=none,0.1") == ("lr", (None, 0.1))
+    assert parse_setting("dropout=0,0.5") == ("dropout", (0.0, 0.5))
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("lr=none"),))
+    args = build_parser("train").parse_args(["train", "--model", "depth", "--data", "d", "--out", "o",
+                                             "--lr", "none"])
+    model = sweep.models()[0]
+    assert model.name == "depth_n3_s0"  # the preset's own model: lr none is the default
+    assert sweep.train_config(model, "d") == config_from_args(
+        TrainConfig, args, **{**dict(sweep.train), "runs": 3, "seed": 0})
+    for setting, named in (("trunk=nonesuch", "'nonesuch'"), ("depth_loss=original,l2", "'l2'"),
+                           ("lr=fast", "'fast'"), ("head_form=concat,none,wide", "'wide'")):
+        assert main(["sweep", "--preset", "smoke", "--set", setting, "--out", str(tmp_path / "s")]) == 2
+        err = capsys.readouterr().err
+        assert f"--set {setting.partition('=')[0]}" in err and named in err, err
+    assert not (tmp_path / "s").exists()
+
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("depth_loss=original,relative"),))
+    names = [m.name for m in sweep.models()]
+    assert sorted({n for n in names if n.startswith("coll")}) == ["coll_n3_s0", "coll_n6_s0"]
+    assert sorted({n for n in names if n.startswith("depth")}) == [
+        "depth_n3_s0", "depth_n3_s0_depth_lossrelative", "depth_n6_s0", "depth_n6_s0_depth_lossrelative"]
+
+
 def test_a_variant_names_each_networks_models_by_what_differs_from_its_own_default() -> None:
     """200 epochs, best weights (select=best, the setting's old name): Coll-Q-Net acts with its best
     weights by default, so only its epochs name its folders; Depth-Q-Net's (its weight average by
@@ -200,11 +281,33 @@ def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> N
     from depthq.data.recorder import CollectConfig
     from depthq.errors import ConfigError
 
-    config = build_config(CollectConfig, {"runs": 3, "env.world.decision_hz": 10.0, "data.horizon": 2})
-    assert (config.runs, config.env.world.decision_hz, config.data.horizon) == (3, 10.0, 2)
+    config = build_config(CollectConfig, {"runs": 3, "env.world.decision_hz": 10.0, "data.min_frames": 30})
+    assert (config.runs, config.env.world.decision_hz, config.data.min_frames) == (3, 10.0, 30)
     assert config.env.world.max_yaw_rate == CollectConfig().env.world.max_yaw_rate  # the enclosing default
     with pytest.raises(ConfigError, match="no setting nothing"):
         build_config(CollectConfig, {"env.nothing": 1})
+
+
+def test_collect_offers_only_what_changes_the_data(capsys: pytest.CaptureFixture[str]) -> None:
+    """A training's sample settings are TrainConfig.samples' alone: collect's --help offers none of
+    them (nor Table II's subsets), and a dataset's manifest written when it held them (before #48)
+    reads without them, so the same collection resumes it."""
+    from depthq.cli import main
+    from depthq.data.labels import SampleConfig
+    from depthq.data.manifest import upgrade_config
+    from depthq.data.recorder import CollectConfig
+
+    with pytest.raises(SystemExit):
+        main(["collect", "--help"])
+    out = capsys.readouterr().out
+    training_only = [f.name for f in dataclasses.fields(SampleConfig) if f.name != "min_frames"]
+    for name in (*training_only, "subsets"):
+        assert f"--data.{name.replace('_', '-')}" not in out and f"--{name.replace('_', '-')} " not in out
+    assert "--data.min-frames" in out and "--data.jpeg-quality" in out
+    recorded = CollectConfig(runs=3).recorded()
+    old = {**recorded, "data": {**recorded["data"], "horizon": 2, "every_run_end": True, "action_clip": 1.0,
+                                "action_lag": 0, "subsets": [50, 100]}}
+    assert upgrade_config(old) == recorded
 
 
 def test_no_setting_is_declared_twice() -> None:

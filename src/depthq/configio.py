@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -10,7 +11,7 @@ import tempfile
 import types
 import typing
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 from depthq import __version__
 from depthq.errors import ConfigError, DataError
@@ -80,6 +81,37 @@ def _convert(hint: Any, value: Any) -> Any:
         inner = args[0] if args else Any
         return tuple(_convert(inner, v) for v in value)
     return value
+
+
+def choices(hint: Any) -> tuple[Any, ...] | None:
+    """The choices of a choice-valued type, `Literal[...]` or `Literal[...] | None` (None among them
+    then); None for any other type."""
+    if typing.get_origin(hint) is Literal:
+        return typing.get_args(hint)
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1 and len(args) == 2 and typing.get_origin(inner[0]) is Literal:
+            return (*typing.get_args(inner[0]), None)
+    return None
+
+
+@functools.cache
+def _choice_fields(cls: type) -> tuple[tuple[str, tuple[Any, ...]], ...]:
+    hints = typing.get_type_hints(cls)
+    fields = ((f.name, choices(hints[f.name])) for f in dataclasses.fields(cls))  # type: ignore[arg-type]
+    return tuple((name, options) for name, options in fields if options is not None)
+
+
+def check_choices(config: Any, where: str) -> None:
+    """Each choice-valued field of the dataclass `config` (typed `Literal[...]`) holds one of the
+    choices its type lists, else a ConfigError naming it ('train.trunk must be one of ...'): the one
+    check of such a setting, so its choices are written once, in its type (which `--help` lists too)."""
+    for name, options in _choice_fields(type(config)):
+        value = getattr(config, name)
+        if not any(value == option and type(value) is type(option) for option in options):
+            shown = ", ".join("none" if o is None else str(o) for o in options)
+            raise ConfigError(f"{where}.{name} must be one of {shown}, got {value!r}")
 
 
 # Seeds reach NumPy (non-negative only), Gymnasium and torch (below 2**64): one range suits all three,

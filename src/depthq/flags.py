@@ -30,6 +30,7 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
+from depthq.configio import choices
 from depthq.errors import ConfigError
 
 T = TypeVar("T")
@@ -129,6 +130,17 @@ def add_config_arguments(
             if spelling != name and spelling not in parser._option_string_actions:
                 groups[where].add_argument(spelling, help=argparse.SUPPRESS, **kwargs)
     return flags
+
+
+def parse_value(flag: Flag, text: str, what: str | None = None) -> Any:
+    """`text` as `flag`'s value, parsed as the flag parses it on the command line ('none' for a field
+    that may be unset, one of a Literal's choices, a tuple's items joined by ','): the one parser of a
+    setting given as text, so `depthq sweep --set` takes what the flags take. Else a ConfigError
+    naming `what` (by default the flag) and the value."""
+    try:
+        return _parse(flag.hint, text)
+    except ValueError as err:
+        raise ConfigError(f"{what or flag.name}: {err}") from None
 
 
 def config_from_args(cls: type[T], args: argparse.Namespace, base: T | None = None, **given: Any) -> T:
@@ -250,8 +262,9 @@ def _show(value: Any) -> str:
 
 
 def _metavar(hint: Any, name: str) -> str | None:
-    if typing.get_origin(hint) is Literal:
-        return "{" + ",".join(map(str, typing.get_args(hint))) + "}"
+    options = choices(hint)
+    if options is not None:  # a choice-valued field lists its choices ("none" last where it may be unset)
+        return "{" + ",".join(_show(o) for o in options) + "}"
     if typing.get_origin(hint) is tuple:
         return f"{name.upper()}[,...]"
     return name.upper()

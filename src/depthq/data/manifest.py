@@ -55,6 +55,9 @@ RUNS = "runs"
 FORMAT = "depthq-dataset"
 FORMAT_VERSION = 1
 _MISSING = object()
+# The settings a collection config's `data` held until #48 that change no stored run (a training's
+# sample settings, and the subsets Table II counts): a manifest written then reads without them.
+_NOT_STORED = ("horizon", "every_run_end", "action_clip", "action_lag", "subsets")
 
 
 @dataclass(frozen=True)
@@ -74,9 +77,15 @@ class RunEntry(RunMeta):
 
 
 def upgrade_config(config: dict[str, Any]) -> dict[str, Any]:
-    """A manifest's collection config in today's shape: a world recorded before looks (`appearance`)
-    names its look (`depthq.sim.look.upgrade_world`), so an older dataset resumes and compares equal."""
-    env = config.get("env") if isinstance(config, dict) else None
+    """A manifest's collection config in today's shape, so an older dataset resumes and compares equal:
+    a world recorded before looks (`appearance`) names its look (`depthq.sim.look.upgrade_world`), and
+    `data` holds only what changes the stored runs (`depthq.data.StorageConfig`; `_NOT_STORED`)."""
+    if not isinstance(config, dict):
+        return config
+    data = config.get("data")
+    if isinstance(data, dict):
+        config = {**config, "data": {k: v for k, v in data.items() if k not in _NOT_STORED}}
+    env = config.get("env")
     if not isinstance(env, dict) or not isinstance(env.get("world"), dict):
         return config
     return {**config, "env": {**env, "world": upgrade_world(env["world"])}}

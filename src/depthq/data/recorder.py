@@ -26,7 +26,7 @@ from tqdm import tqdm
 from depthq.configio import check_seed, to_dict
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.control.policy import Policy
-from depthq.data import DataConfig
+from depthq.data import StorageConfig
 from depthq.data.labels import usable as is_usable
 from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
@@ -61,7 +61,7 @@ class CollectConfig:
     skip_frames: int = SKIP_FRAMES  # the first frames of every run, driven but not stored
     env: EnvConfig = field(default_factory=exploration_env)  # the robot's commands unclipped, 50 s runs
     ou: OUConfig = field(default_factory=OUConfig)  # the exploration policy
-    data: DataConfig = field(default_factory=DataConfig)
+    data: StorageConfig = field(default_factory=StorageConfig)  # what is stored; samples are training's
     # Which draw: run i of a split drives its canyon with sensor and OU noise seeded from (seed, split, i).
     # The manifest records it beside the rest of the config (`recorded`), as it always has.
     seed: int = 0

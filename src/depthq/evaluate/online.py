@@ -14,14 +14,14 @@ import time
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
 from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, check_seed, provenance, to_dict, write_json
-from depthq.control.action_selection import Selection
+from depthq.control.action_selection import DEPTH_RULES, Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4, plot_trajectories
@@ -84,7 +84,7 @@ class EvalConfig:
     # How a lookahead Depth-Q-Net scores its candidate sequences: discounted_nearest_bin or
     # farthest_nearest_bin (docs/design.md#lookahead-selection). A one-step net's choice is the same
     # under each rule.
-    rule: str = "discounted_nearest_bin"
+    rule: Literal[DEPTH_RULES] = "discounted_nearest_bin"  # type: ignore[valid-type]
     # The step weight's base of discounted_nearest_bin.
     discount: float = 0.9
     # A lookahead Depth-Q-Net also scores sequences that switch action once.

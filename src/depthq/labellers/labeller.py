@@ -25,10 +25,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import typing
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -38,6 +39,7 @@ from tqdm import tqdm
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import (
     atomic_write_bytes,
+    check_choices,
     check_seed,
     from_dict,
     provenance,
@@ -66,7 +68,10 @@ WEIGHTS = "weights.safetensors"
 LOG_BLOCKS = 10  # the training loss is recorded as the mean over each tenth of the steps
 
 
-METHODS = ("floor", "perception", "monodepth")
+Method = Literal["floor", "perception", "monodepth"]
+METHODS: tuple[str, ...] = typing.get_args(Method)
+# The trunks a perception labeller reads: frozen ones, whose features are cached in its dataset.
+FrozenTrunk = Literal[tuple(name for name, spec in TRUNKS.items() if spec.frozen)]  # type: ignore[valid-type]
 # The method's defaults of the settings a LabellerConfig leaves None: (scale, steps, batch_size, lr);
 # perception uses no scale (its records hold the 2 they always held).
 _DEFAULTS = {"floor": (2, 600, 8, 1e-3), "perception": (2, 4000, 64, 0.1), "monodepth": (4, 1500, 8, 1e-3)}
@@ -87,9 +92,9 @@ class LabellerConfig:
     # frame's neighbours into it, Monodepth2's self-supervision), "floor" (camera and odometry only: where
     # the floor ends, learnt from the robot's future footprint) or "perception" (a read-out of the
     # trunk's feature learnt on another family's LiDAR: a stand-in for an off-the-shelf depth model).
-    method: str = "monodepth"
+    method: Method = "monodepth"
     # perception: a frozen trunk (its features are cached in `data`); the default Depth-Q-Net's.
-    trunk: str = DEFAULT_TRUNK
+    trunk: FrozenTrunk = DEFAULT_TRUNK
     # perception: side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
     # perception: width of the read-out's hidden layer (the depth-first head's).
@@ -137,12 +142,7 @@ class LabellerConfig:
         check_seed(self.seed)
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
-        if self.method not in METHODS:
-            raise ConfigError(f"labeller.method must be one of {list(METHODS)}, got {self.method!r}")
-        spec = TRUNKS.get(self.trunk)
-        if spec is None or not spec.frozen:
-            frozen = sorted(name for name, s in TRUNKS.items() if s.frozen)
-            raise ConfigError(f"labeller.trunk must be a frozen trunk, one of {frozen}, got {self.trunk!r}")
+        check_choices(self, "labeller")  # method, trunk
         for name, value in zip(("scale", "steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)

@@ -34,15 +34,9 @@ load, with a warning that they cannot be verified. config.json and the weights' 
 written is refused; one written before checksums is read as it is. Weight files' headers are written
 with sorted keys, so equal tensors and metadata give equal bytes in any process.
 
-Older versions still load (`read_config` gives them version 3's shape): 1 (no digests) and 2 (the
-layout before `dataset` and `policy`); a record without `lookahead` (head and train) is a one-step
-Depth-Q-Net (lookahead 1), one without `feature_projection` a head without projection (0), one
-without `precision` a float32 training; a head without `action_scale` takes the action unscaled (1),
-one without `form` is the paper's ("concat"). Fields renamed within version 3 read under their new
-names: `train.select` as `train.weights`, `policy.selection` as `policy.rule`, the
-dataset's `env.world.appearance` as `env.world.look` ("default": "flat", "randomized": "colours"); the
-sample settings a train record held itself (`horizon`, `min_frames`, `every_run_end`, `action_clip`,
-`action_lag`) read inside `train.samples`, where TrainConfig holds them now.
+Older versions still load: `read_config` gives them version 3's shape through their version's
+migration (`depthq.nets.migrations`, one function per version): 1 (no digests), 2 (the layout before
+`dataset` and `policy`), and version 3 as written before its later fields (added, renamed, moved).
 A newer version is refused by name.
 """
 
@@ -52,7 +46,7 @@ import hashlib
 import json
 import re
 import warnings
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,12 +57,10 @@ from safetensors.torch import save as save_safetensors
 
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import from_dict, provenance, to_dict
-from depthq.control.action_selection import ACTIONS, RULE_OF
-from depthq.data.labels import SampleConfig
-from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
 from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
+from depthq.nets.migrations import migrate_checkpoint
 from depthq.nets.trunk import TRUNKS, build_trunk
 
 CONFIG = "config.json"
@@ -84,31 +76,6 @@ _WEIGHT_FILE = {"best": "best", "last": "last", "final": "last", "average": "ave
 _SNAPSHOT = re.compile(r"epoch:([0-9]+)")
 _FIX = "restore the checkpoint folder from a copy, or train it again (a config is never edited by hand)"
 _HEADER_LENGTH = 8  # safetensors: u64 little-endian header size, JSON header, then the tensor bytes
-# What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
-# its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
-_LEGACY_FRAME_SIZE = (308, 410)
-_LEGACY_DECISION_HZ = 4.0
-# TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
-# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32 on LiDAR bins; the
-# paper's head, the default until "depth_first" was, and recorded only when it was not; no weight
-# average), so such a folder still loads and resumes.
-_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
-                "head_form": "concat", "labels": "lidar", "average": 0.0}
-# HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
-# field (action_scale, lookahead, feature_projection, form, output_bias, in that order) or, for `form`,
-# at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33). These are
-# the defaults HeadConfig had then: the paper's head, the action unscaled, the output bias 0. Every
-# record holds kind, feature_dim, hidden, n_bins and dropout (written by dataclasses.asdict from the
-# first checkpoint on).
-_ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "form": "concat",
-               "output_bias": 0.0}
-# Fields renamed within version 3 (old name → new), as a record written before the rename reads.
-_RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
-# TrainConfig fields moved into a nested config within version 3 (#33: its sample settings into
-# `samples`), as a record written before the move reads.
-_NESTED_TRAIN = {"samples": tuple(f.name for f in fields(SampleConfig))}
-
-
 @dataclass(frozen=True)
 class DatasetRecord:
     """The dataset a checkpoint was trained on: where it was, what it held, how it was made."""
@@ -259,15 +226,7 @@ def read_config(folder: Path) -> dict[str, Any]:
             f"{path}: checkpoint format version {version!r}, but this depthq reads versions 1 to "
             f"{FORMAT_VERSION}; it was written by a newer depthq: upgrade depthq to read it"
         )
-    record = _renamed(record)
-    record = record if version == FORMAT_VERSION else _upgrade(record)
-    dataset = record.get("dataset")
-    if isinstance(dataset, dict) and isinstance(dataset.get("env"), dict):  # `appearance` → `look`
-        record = {**record, "dataset": {**dataset, "env": upgrade_config(dataset)["env"]}}
-    head = record.get("head")
-    if isinstance(head, dict):
-        record = {**record, "head": {**_ADDED_HEAD, **head}}
-    return {**record, "train": _nested({**_ADDED_TRAIN, **record.get("train", {})})}
+    return migrate_checkpoint(record, version)
 
 
 def write_sidecar(folder: Path, stem: str, record: dict[str, Any]) -> None:
@@ -278,55 +237,6 @@ def write_sidecar(folder: Path, stem: str, record: dict[str, Any]) -> None:
 def read_sidecar(folder: Path, stem: str) -> dict[str, Any]:
     """`folder`/`stem`.json (`write_sidecar`), its checksum checked."""
     return read_checked_json(Path(folder) / f"{stem}.json", _FIX)
-
-
-def _nested(train: dict[str, Any]) -> dict[str, Any]:
-    """A train record with the fields moved into nested configs (`_NESTED_TRAIN`) there."""
-    out = dict(train)
-    for block, names in _NESTED_TRAIN.items():
-        moved = {name: out.pop(name) for name in names if name in out}
-        if moved:
-            out[block] = {**moved, **out.get(block, {})}
-    return out
-
-
-def _renamed(record: dict[str, Any]) -> dict[str, Any]:
-    """`record` with the fields renamed within version 3 (`_RENAMED`) under their new names."""
-    out = dict(record)
-    for block, names in _RENAMED.items():
-        if isinstance(out.get(block), dict):
-            out[block] = {names.get(k, k): v for k, v in out[block].items()}
-    return out
-
-
-def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
-    """A version 1 or 2 record in version 3's shape: the policy it was trained for, its dataset as
-    its manifest says (when that is found where the record points, relative paths from here)."""
-    train = {"weights": "best", "snapshots": [], **record.get("train", {})}
-    data = Path(str(train.get("data")))
-    try:
-        env = Dataset.open(data).config.get("env")
-    except (ConfigError, DataError):
-        warnings.warn(f"{data}: dataset not found; its decision rate is taken as {_LEGACY_DECISION_HZ:g} "
-                      "Hz (a checkpoint written by an older depthq records none)", stacklevel=3)
-        env = None
-    world = (env or {}).get("world", {})
-    camera = {"height": _LEGACY_FRAME_SIZE[0], "width": _LEGACY_FRAME_SIZE[1], **world.get("camera", {})}
-    kind = (record.get("head") or {}).get("kind")
-    old = {k: v for k, v in record.items() if k != "data_fingerprint"}
-    return {
-        **old,
-        "format_version": FORMAT_VERSION,
-        "train": train,
-        "dataset": {"path": str(data), "fingerprint": record.get("data_fingerprint"), "env": env},
-        "policy": {
-            "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
-            "frame_size": [camera["height"], camera["width"]],
-            "actions": list(ACTIONS),
-            "rule": RULE_OF.get(kind, ""),
-            "bins": (env or {}).get("bins"),
-        },
-    }
 
 
 def stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:

@@ -12,14 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from depthq.train.config import MOVED_SETTINGS
+from depthq.nets.migrations import FOLDER_KEYS
 
 NETS = ("depth", "coll")
-# Settings renamed or moved since sweeps named model folders after them: the new name → the name
-# folders keep, so a sweep finds and reuses the folders trained before (`--set weights=final` is
-# depth_n200_s0_selectfinal, as `--set select=final` was; `--set samples.horizon=2` is
-# coll_n200_s0_horizon2, as `--set horizon=2` was).
-FOLDER_KEYS = {"weights": "select", **{new: old for old, new in MOVED_SETTINGS.items()}}
 
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:

@@ -34,9 +34,10 @@ from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
+from depthq.nets.migrations import sweep_setup
 from depthq.nets.trunk import TRUNKS
 from depthq.parallel import LOCAL, Executor, Job
-from depthq.pipeline.sweep import SETUP_DEFAULTS, Sweep
+from depthq.pipeline.sweep import Sweep
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
 from depthq.train.folder import saved_epoch, settings_differing
@@ -174,10 +175,8 @@ def _claim(out: Path, sweep: Sweep) -> None:
     (networks, sizes, seeds, variants) may differ: models already there are reused."""
     marker = out / "reproduce.json"
     if marker.is_file():
-        held = read_json(marker)
-        held = held.get("sweep", held.get("preset", {}))  # folders written before sweeps say "preset"
+        held = sweep_setup(read_json(marker))
         ours = sweep.setup()
-        held = {**SETUP_DEFAULTS, **held}
         differ = [f"{k} {held.get(k)!r} there, {v!r} here" for k, v in ours.items() if held.get(k) != v]
         if differ:
             raise ConfigError(

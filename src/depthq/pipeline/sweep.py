@@ -12,15 +12,17 @@ from __future__ import annotations
 import itertools
 import json
 import re
+import typing
 from dataclasses import dataclass, replace
 from typing import Any
 
 from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
-from depthq.flags import build_config, config_flags, get_path
-from depthq.pipeline.layout import FOLDER_KEYS, NETS, model_name, setting_text
-from depthq.sim.canyon import FAMILIES, PAPER, eval_set, split_family
+from depthq.flags import build_config, config_flags, get_path, parse_value
+from depthq.nets.migrations import RENAMED_SETTINGS
+from depthq.pipeline.layout import NETS, model_name, setting_text
+from depthq.sim.canyon import FAMILIES, eval_set, split_family
 from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig
 
@@ -28,13 +30,12 @@ Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field path, value) pairs; 
 Settings = tuple[tuple[str, Any], ...]  # (field path, value) pairs: a partial config, the rest its defaults
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
-# Settings only Depth-Q-Net has (`TrainConfig.lookahead`): a Coll-Q-Net in a variant that sets them
-# is the variant without them, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
-# variant's row shows it).
-DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap")
-# Old spellings of renamed or moved settings, accepted by --set for one release: 'select' → 'weights',
-# 'horizon' → 'samples.horizon'.
-RENAMED_SETTINGS = {old: new for new, old in FOLDER_KEYS.items()}
+# Settings only Depth-Q-Net has (`TrainConfig.lookahead`, its loss, its labels' source, its bins'
+# initial bias): a Coll-Q-Net in a variant that sets them is the variant without them, so `--set
+# lookahead=1,3,5` or `--set depth_loss=original,relative` trains each Coll-Q-Net once, under its own
+# name (and every variant's row shows it), rather than refusing a grid over both networks.
+DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
+              "output_bias")
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 
@@ -173,10 +174,6 @@ class Sweep:
         return {**json.loads(json.dumps(grid)), **self.setup()}
 
 
-# What a folder written before a setting was part of the setup holds for it.
-SETUP_DEFAULTS: dict[str, Any] = {"family": PAPER}
-
-
 def retarget(
     sweep: Sweep, family: str | None = None, canyons: str | None = None, decision_hz: float | None = None,
     look: str | None = None,
@@ -246,37 +243,25 @@ def differing(net: str, variant: Variant, train: Settings = ()) -> Variant:
 
 def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     """'dropout=0,0.5' → ('dropout', (0.0, 0.5)): a TrainConfig field (its path below a nested config:
-    'samples.horizon=1,2') and the values to try. A tuple field takes each value as items joined by
-    '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
+    'samples.horizon=1,2') and the values to try, each parsed as `depthq train`'s flag parses it
+    (`depthq.flags.parse_value`: 'lr=none' is `--lr none`). A tuple field takes each value as items
+    joined by '+': 'snapshots=40,40+80' → ((40,), (40, 80))."""
     key, sep, raw = text.partition("=")
     key = key.strip().replace("-", "_")  # the flag's spelling (depthq train --action-scale) or the field's
     key = RENAMED_SETTINGS.get(key, key)
-    defaults = {f.path: f.default for f in config_flags(TrainConfig)}
+    flags = {f.path: f for f in config_flags(TrainConfig)}
     if not sep or not raw:
         raise ConfigError(f"--set takes FIELD=VALUE[,VALUE…], got {text!r}")
-    if key not in defaults or key in NOT_IN_GRID:
-        allowed = sorted(set(defaults) - set(NOT_IN_GRID))
+    if key not in flags or key in NOT_IN_GRID:
+        allowed = sorted(set(flags) - set(NOT_IN_GRID))
         raise ConfigError(f"--set {key!r} is not a training setting one can sweep; one of {allowed}")
     values = []
+    tupled = typing.get_origin(flags[key].hint) is tuple  # its items joined by '+' here, by ',' in a flag
     for item in raw.split(","):
-        if isinstance(defaults[key], tuple):
-            value = tuple(_value(part, None) for part in item.split("+"))
-        else:
-            value = _value(item, defaults[key])
+        value = parse_value(flags[key], item.replace("+", ",") if tupled else item, f"--set {key}")
         if not _SAFE.match(setting_text(value)):
             raise ConfigError(f"--set {key}: value {item!r} cannot name a model folder")
         values.append(value)
     if len(set(map(str, values))) != len(values):
         raise ConfigError(f"--set {key}: {raw!r} repeats a value")
     return key, tuple(values)
-
-
-def _value(text: str, default: Any) -> Any:
-    """One value of `--set`: a JSON number or word; an int for a float setting becomes a float."""
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError:
-        value = text  # a word, e.g. a trunk's name
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    return value

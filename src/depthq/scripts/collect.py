@@ -6,6 +6,7 @@ import argparse
 import time
 from pathlib import Path
 
+from depthq.data import DataConfig
 from depthq.data.stats import dataset_stats, format_stats
 from depthq.flags import add_config_arguments, config_from_args
 from depthq.parallel import add_executor_arguments, executor_from
@@ -41,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - start
     size = sum(p.stat().st_size for p in (args.out / "runs").glob("*.h5"))
     frames = sum(e.n_frames for e in dataset.entries())
-    print(format_stats(dataset_stats(dataset, config.data)))
+    # Table II as a training counts it by default, of the runs that count as collected.
+    print(format_stats(dataset_stats(dataset, DataConfig(min_frames=config.data.min_frames))))
     print(
         f"{len(dataset.entries())} runs, {frames} frames, {size / 2**20:.1f} MiB "
         f"({size / max(frames, 1) / 1024:.1f} KiB per frame) in {args.out}; this call took {elapsed:.1f} s"

@@ -12,9 +12,6 @@ from depthq.data.manifest import Dataset
 from depthq.data.stats import stats_report
 from depthq.flags import add_config_arguments, config_from_args
 
-# How runs are stored does not change what they count as: no flag for it here.
-_NOT_STATS = ("jpeg_quality",)
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
@@ -22,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                "camera labels' error against the LiDAR where runs hold both")
     stats.add_argument("dir", type=Path, help="dataset folder")
     stats.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    add_config_arguments(stats, DataConfig, exclude=_NOT_STATS)
+    add_config_arguments(stats, DataConfig)
     verify = actions.add_parser("verify", help="read every run file and check it against the manifest, and "
                                 "every feature cache against its checksum")
     verify.add_argument("dir", type=Path, help="dataset folder")

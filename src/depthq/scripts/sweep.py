@@ -25,10 +25,10 @@ _HELP = {
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from depthq.data.recorder import CollectConfig  # MuJoCo: only when this verb's flags are built
+    from depthq.pipeline.presets import PRESETS
 
-    p.add_argument(
-        "--preset", default="quick", help="the sweep to start from: smoke, quick, paper, nominal, hard"
-    )
+    p.add_argument("--preset", default="quick", metavar="{" + ",".join(PRESETS) + "}",
+                   help="the sweep to start from (default: quick)")
     p.add_argument(
         "--canyons",
         help="evaluation canyons, e.g. hard/val:1000-1019 to compare settings on val canyons "
@@ -43,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=[],
         metavar="FIELD=V1,V2",
         help="a training setting (a TrainConfig field, as `depthq train` spells its flag) and the values "
-        "to try, e.g. dropout=0,0.5 or samples.horizon=2,5 (repeatable: their product)",
+        "to try, each as that flag takes it, e.g. dropout=0,0.5, lr=none,0.05 or samples.horizon=2,5 "
+        "(repeatable: their product; a Depth-Q-Net-only setting leaves Coll-Q-Net's models as they are)",
     )
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed or widened when rerun)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)

@@ -8,27 +8,19 @@ from pathlib import Path
 from depthq.flags import add_config_arguments, config_from_args, flag_name
 from depthq.nets.checkpoint import read_sidecar
 from depthq.nets.device import DEVICE_HELP
-from depthq.nets.losses import DEPTH_LOSSES
-from depthq.nets.trunk import TRUNKS
-from depthq.train.config import MOVED_SETTINGS, TrainConfig
-
-# What --help adds to TrainConfig's own comments: the choices, and words for undocumented fields.
-_HELP = {
-    "trunk": f"one of {', '.join(sorted(TRUNKS))}",
-    "depth_loss": f"one of {', '.join(DEPTH_LOSSES)}",
-}
-
+from depthq.nets.migrations import RENAMED_SETTINGS
+from depthq.train.config import TrainConfig
 
 # Older spellings of TrainConfig's flags, accepted for one release: --select, and the sample settings'
 # flat flags from before TrainConfig held them in `samples` (--horizon for --samples.horizon).
-_ALIASES = {"weights": ("--select",), **{path: (flag_name(old),) for old, path in MOVED_SETTINGS.items()}}
+_ALIASES = {path: (flag_name(old),) for old, path in RENAMED_SETTINGS.items()}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, help="checkpoint folder (created, or resumed)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    add_config_arguments(p, TrainConfig, aliases=_ALIASES, more_help=_HELP)
+    add_config_arguments(p, TrainConfig, aliases=_ALIASES)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Literal
 
 import mujoco
 import numpy as np
@@ -57,7 +58,7 @@ class WorldConfig:
     # The sun casts shadows in the textured looks (costly on a software renderer: docs/benchmarks.md).
     shadows: bool = field(default=False, metadata=OMIT_DEFAULT)
     # The canyon family whose canyons `canyon` generates: paper or hard (`depthq.sim.canyon.FAMILIES`).
-    family: str = field(default=PAPER, metadata=OMIT_DEFAULT)
+    family: Literal[tuple(FAMILIES)] = field(default=PAPER, metadata=OMIT_DEFAULT)  # type: ignore[valid-type]
 
     def __post_init__(self) -> None:
         if not self.speed > 0:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+import typing
+from dataclasses import dataclass, field
+from typing import Literal
 
-from depthq.configio import OMIT_DEFAULT, check_seed
+from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.labels import SampleConfig, check_lookahead
 from depthq.errors import ConfigError
@@ -34,11 +36,15 @@ DEFAULT_WEIGHTS = {"depth_first": "final"}
 # canyons up to 10 m apart, their mean steadily far (docs/design.md#weight-average).
 DEFAULT_AVERAGE = {"depth_first": 0.25}
 # The forward pass's arithmetic in training and validation (docs/benchmarks.md#precision).
-PRECISIONS = ("fp32", "bf16")
-# TrainConfig's settings that moved into its `samples` (#33), by the names they had before: their old
-# flags (--horizon), sweep settings (--set horizon=2) and model folder names (coll_n200_s0_horizon2)
-# still take them, for one release.
-MOVED_SETTINGS = {f.name: f"samples.{f.name}" for f in fields(SampleConfig)}
+Precision = Literal["fp32", "bf16"]
+PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
+# The other choice-valued settings' types, each from the tuple or registry that owns its choices: the
+# flags list them (`depthq train --help`) and `check_choices` checks them, with no list of them here.
+TrunkName = Literal[tuple(TRUNKS)]  # type: ignore[valid-type]
+DepthLoss = Literal[DEPTH_LOSSES]  # type: ignore[valid-type]
+HeadForm = Literal[HEAD_FORMS]  # type: ignore[valid-type]
+LabelSource = Literal[LABEL_SOURCES]  # type: ignore[valid-type]
+Weights = Literal[WEIGHTS]  # type: ignore[valid-type]
 
 
 def check_precisions(precisions: tuple[str, ...], what: str) -> None:
@@ -68,6 +74,8 @@ class TrainConfig:
     (docs/design.md#training).
     `runs` takes the first n usable training runs (the paper's nested subsets); None takes all.
     `lr` None means the paper's rate for `model`; read the effective one from `learning_rate`.
+    Settings whose default depends on other fields (`head_form`, `average`, `weights`; `lr`) are
+    resolved in one place, `_resolve_defaults`.
     """
 
     model: str  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
@@ -91,7 +99,7 @@ class TrainConfig:
     eps: float = EPS
     # L2 weight decay of the head's weights (the original's).
     weight_decay: float = WEIGHT_DECAY
-    trunk: str = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.nets.trunk)
+    trunk: TrunkName = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.nets.trunk)
     # Dropout on the feature; the paper's 0.5 blurs a frozen feature's predictions
     # (docs/deviations.md#dropout).
     dropout: float = 0.0
@@ -100,7 +108,8 @@ class TrainConfig:
     action_scale: float = 10.0
     # Side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
-    depth_loss: str = "original"  # Depth-Q-Net's L1 loss over the bins (`depthq.nets.losses.depth_l1_loss`)
+    # Depth-Q-Net's L1 loss over the bins (`depthq.nets.losses.depth_l1_loss`)
+    depth_loss: DepthLoss = "original"
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
     # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's
     # collision-label window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
@@ -121,7 +130,7 @@ class TrainConfig:
     # them and the action), concat (the action appended to the feature: the paper's head) or
     # per_action (bins per anchor action); none: depth_first for a one-step Depth-Q-Net, else concat.
     # A Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
-    head_form: str | None = None
+    head_form: HeadForm | None = None
     # The initial bias of Depth-Q-Net's layers that output depth bins, in metres (the paper's: 0). Above 0,
     # an output unit behind the final ReLU starts alive for every input, so none is dead (always 0, no
     # reading to the policy) from the initialisation on (docs/oracle_gap.md#dead-bins).
@@ -138,7 +147,7 @@ class TrainConfig:
     # Depth-Q-Net's bins, its targets and a depth_first head's current bins: the LiDAR's ("lidar") or
     # those a labeller estimated from the camera ("camera", written by `depthq label`;
     # docs/design.md#camera-labels). Coll-Q-Net's label is the bump: "lidar" only.
-    labels: str = "lidar"
+    labels: LabelSource = "lidar"
     # Which frames of the dataset's runs are samples, and their labels (docs/design.md#labels).
     samples: SampleConfig = field(default_factory=SampleConfig)
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
@@ -146,7 +155,7 @@ class TrainConfig:
     # last epochs' mean, `average`); none: average when `average` is set, else final for a
     # depth_first head and best for the others. The head form's
     # choice was made on `val` canyons (docs/design.md#weights). Training is the same either way.
-    weights: str | None = None
+    weights: Weights | None = None
     # Epochs whose weights are kept as well (epoch_0040.safetensors, `--weights epoch:40`), so that one
     # long training also gives the policies of shorter ones.
     snapshots: tuple[int, ...] = ()
@@ -158,20 +167,13 @@ class TrainConfig:
     average: float | None = None
     # "bf16": training and validation forward passes under torch.autocast in bfloat16 (weights,
     # gradients, loss and Adadelta stay float32); "fp32": float32 throughout. Policies decide in float32.
-    precision: str = "fp32"
+    precision: Precision = "fp32"
 
     def __post_init__(self) -> None:
         check_seed(self.seed)
         if self.model not in HEAD_KINDS:
             raise ConfigError(f"train.model must be one of {HEAD_KINDS}, got {self.model!r}")
-        # Defaults that depend on other fields are resolved here, so a stored config names its choice.
-        if self.head_form is None and isinstance(self.lookahead, int):
-            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
-        if self.average is None:
-            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
-        if self.weights is None:
-            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(str(self.head_form), "best")
-            object.__setattr__(self, "weights", chosen)
+        self._resolve_defaults()
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
         if self.runs is not None:
@@ -201,12 +203,9 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value < high:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
-        if self.trunk not in TRUNKS:
-            raise ConfigError(f"train.trunk must be one of {sorted(TRUNKS)}, got {self.trunk!r}")
+        check_choices(self, "train")  # trunk, depth_loss, head_form, labels, weights, precision
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
-        if self.head_form not in HEAD_FORMS:
-            raise ConfigError(f"train.head_form must be one of {HEAD_FORMS}, got {self.head_form!r}")
         self.head()  # the head's own rules (form, lookahead, projection size)
         self._check_bootstrap()
         if not isinstance(self.mirror, bool):
@@ -214,21 +213,34 @@ class TrainConfig:
         if self.mirror and not TRUNKS[self.trunk].frozen:
             raise ConfigError(f"train.mirror: mirrored samples come from a frozen trunk's feature cache, "
                               f"but trunk {self.trunk!r} is trained with the head")
-        if self.depth_loss not in DEPTH_LOSSES:
-            raise ConfigError(f"train.depth_loss must be one of {DEPTH_LOSSES}, got {self.depth_loss!r}")
-        if self.weights not in WEIGHTS:
-            raise ConfigError(f"train.weights must be one of {WEIGHTS}, got {self.weights!r}")
         self._check_snapshots()
         self._check_average()
-        if self.precision not in PRECISIONS:
-            raise ConfigError(f"train.precision must be one of {PRECISIONS}, got {self.precision!r}")
-        if self.labels not in LABEL_SOURCES:
-            raise ConfigError(f"train.labels must be one of {LABEL_SOURCES}, got {self.labels!r}")
         if self.model == "coll" and self.labels != "lidar":
             raise ConfigError(
                 f"train.labels {self.labels!r}: Coll-Q-Net learns from the bump, not from depth bins; "
                 "camera labels are Depth-Q-Net's (--model depth), use --labels lidar"
             )
+
+    def _resolve_defaults(self) -> None:
+        """The defaults that depend on other fields, all resolved here (before any check), so that a
+        stored config names its choice:
+
+        - `head_form` none: the network's own for its lookahead (`default_form`: depth_first for a
+          one-step Depth-Q-Net, else concat); the network's, so a network registry supplies it;
+        - `average` none: its head form's (`DEFAULT_AVERAGE`: 0.25 for depth_first), else 0;
+        - `weights` none: average when the training averages, else its head form's
+          (`DEFAULT_WEIGHTS`: final for depth_first), else best.
+
+        `lr` none is the one left unresolved: configs have always stored it as none (model folders
+        are matched on it), and `learning_rate` reads the network's rate (`DEFAULT_LR`), the other
+        default a network registry supplies."""
+        if self.head_form is None and isinstance(self.lookahead, int):
+            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
+        if self.average is None:
+            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
+        if self.weights is None:
+            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(str(self.head_form), "best")
+            object.__setattr__(self, "weights", chosen)
 
     def _check_projection(self) -> None:
         _int_at_least("feature_projection", self.feature_projection, 0)
@@ -292,5 +304,5 @@ class TrainConfig:
 
     @property
     def learning_rate(self) -> float:
-        """The learning rate in use: `lr`, or the paper's for this model."""
+        """The learning rate in use: `lr`, or the network's (`DEFAULT_LR`; see `_resolve_defaults`)."""
         return DEFAULT_LR[self.model] if self.lr is None else float(self.lr)

@@ -1,0 +1,138 @@
+"""Old on-disk shapes read as today's, in one place: one function per version of a checkpoint's
+config.json (`depthq.nets.checkpoint`), and the old names of the settings renamed or moved since
+sweeps named model folders after them (docs/formats.md).
+
+    checkpoint_v1   version 1 → 2: weight files gained their SHA-256 (in their own metadata); the
+                    config is unchanged
+    checkpoint_v2   version 2 → 3: config.json describes its policy and its dataset
+    checkpoint_v3   version 3 as written before its later fields (0.1.0 is unreleased, so they came
+                    without a version): fields added, renamed and moved read as today's
+    sweep_setup     a sweep folder's reproduce.json written before sweeps ("preset") or before a
+                    setting was part of a sweep's setup (`family`)
+    RENAMED_SETTINGS, FOLDER_KEYS
+                    settings by the names they had: their old flags (--select, --horizon), sweep
+                    settings (--set select=final) and the model folders named after them
+                    (depth_n200_s0_selectfinal) still take them
+
+A dataset manifest's own migration is `depthq.data.manifest.upgrade_config`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Any
+
+from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.data.manifest import Dataset, upgrade_config
+from depthq.errors import ConfigError, DataError
+from depthq.sim.canyon import PAPER
+
+# What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
+# its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
+_LEGACY_FRAME_SIZE = (308, 410)
+_LEGACY_DECISION_HZ = 4.0
+# TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
+# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32 on LiDAR bins; the
+# paper's head, the default until "depth_first" was, and recorded only when it was not; no weight
+# average), so such a folder still loads and resumes.
+_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
+                "head_form": "concat", "labels": "lidar", "average": 0.0}
+# HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
+# field (action_scale, lookahead, feature_projection, form, output_bias, in that order) or, for `form`,
+# at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33). These are
+# the defaults HeadConfig had then: the paper's head, the action unscaled, the output bias 0. Every
+# record holds kind, feature_dim, hidden, n_bins and dropout (written by dataclasses.asdict from the
+# first checkpoint on).
+_ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "form": "concat",
+               "output_bias": 0.0}
+# Fields renamed within version 3 (old name → new), as a record written before the rename reads.
+_RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
+# TrainConfig's sample settings, which it held itself until #33 moved them into `samples`
+# (`depthq.data.labels.SampleConfig`).
+_SAMPLE_SETTINGS = ("horizon", "min_frames", "every_run_end", "action_clip", "action_lag")
+
+# TrainConfig settings by their old names (old → today's path): `select` became `weights` (#33), the
+# sample settings moved into `samples`.
+RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in _SAMPLE_SETTINGS}}
+# Today's path → the name model folders keep (`depthq.pipeline.layout.model_name`), so a sweep finds
+# and reuses the folders trained before (`--set weights=final` is depth_n200_s0_selectfinal, as
+# `--set select=final` was; `--set samples.horizon=2` is coll_n200_s0_horizon2).
+FOLDER_KEYS = {new: old for old, new in RENAMED_SETTINGS.items()}
+# What a sweep folder written before a setting was part of a sweep's setup holds for it.
+_SETUP_ADDED = {"family": PAPER}
+
+
+def migrate_checkpoint(record: dict[str, Any], version: int) -> dict[str, Any]:
+    """A checkpoint's config.json of format `version` (1 to 3) in today's shape: each version's
+    migration from `version` on."""
+    if version < 2:
+        record = checkpoint_v1(record)
+    if version < 3:
+        record = checkpoint_v2(record)
+    return checkpoint_v3(record)
+
+
+def checkpoint_v1(record: dict[str, Any]) -> dict[str, Any]:
+    """Version 1 → 2: only the weight files changed (they record their SHA-256; a file without one
+    loads with a warning, `depthq.nets.checkpoint.read_weights`)."""
+    return {**record, "format_version": 2}
+
+
+def checkpoint_v2(record: dict[str, Any]) -> dict[str, Any]:
+    """Version 2 → 3: the policy it was trained for and its dataset, as that dataset's manifest says
+    (when it is found where the record points, relative paths from here), its default weights the
+    best (`train.weights`) and no snapshots."""
+    train = {"weights": "best", "snapshots": [], **record.get("train", {})}
+    data = Path(str(train.get("data")))
+    try:
+        env = Dataset.open(data).config.get("env")
+    except (ConfigError, DataError):
+        warnings.warn(f"{data}: dataset not found; its decision rate is taken as {_LEGACY_DECISION_HZ:g} "
+                      "Hz (a checkpoint written by an older depthq records none)", stacklevel=4)
+        env = None
+    world = (env or {}).get("world", {})
+    camera = {"height": _LEGACY_FRAME_SIZE[0], "width": _LEGACY_FRAME_SIZE[1], **world.get("camera", {})}
+    kind = (record.get("head") or {}).get("kind")
+    old = {k: v for k, v in record.items() if k != "data_fingerprint"}
+    return {
+        **old,
+        "format_version": 3,
+        "train": train,
+        "dataset": {"path": str(data), "fingerprint": record.get("data_fingerprint"), "env": env},
+        "policy": {
+            "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
+            "frame_size": [camera["height"], camera["width"]],
+            "actions": list(ACTIONS),
+            "rule": RULE_OF.get(kind, ""),
+            "bins": (env or {}).get("bins"),
+        },
+    }
+
+
+def checkpoint_v3(record: dict[str, Any]) -> dict[str, Any]:
+    """Version 3 as written today: fields renamed (`_RENAMED`) under their new names, the dataset's
+    world before looks naming its look (`upgrade_config`), the head's and the training's fields added
+    since at what they meant before (`_ADDED_HEAD`, `_ADDED_TRAIN`), the sample settings a train record
+    held itself inside `train.samples`. A record written today is returned as it is."""
+    out = dict(record)
+    for block, names in _RENAMED.items():
+        if isinstance(out.get(block), dict):
+            out[block] = {names.get(k, k): v for k, v in out[block].items()}
+    dataset = out.get("dataset")
+    if isinstance(dataset, dict) and isinstance(dataset.get("env"), dict):  # `appearance` → `look`
+        out["dataset"] = {**dataset, "env": upgrade_config(dataset)["env"]}
+    if isinstance(out.get("head"), dict):
+        out["head"] = {**_ADDED_HEAD, **out["head"]}
+    train = {**_ADDED_TRAIN, **out.get("train", {})}
+    moved = {name: train.pop(name) for name in _SAMPLE_SETTINGS if name in train}
+    if moved:
+        train["samples"] = {**moved, **train.get("samples", {})}
+    return {**out, "train": train}
+
+
+def sweep_setup(record: dict[str, Any]) -> dict[str, Any]:
+    """The sweep a folder's reproduce.json records (`depthq.pipeline.sweep.Sweep.record`) in today's
+    shape: under "sweep", or "preset" in a folder written before sweeps; a setup setting it predates
+    (`_SETUP_ADDED`) at the one value there was."""
+    return {**_SETUP_ADDED, **record.get("sweep", record.get("preset", {}))}
