@@ -1,5 +1,5 @@
-"""The checks behind docs/results.md#before-10 ("What this shows"): why Depth-Q-Net steered towards
-walls on our data.
+"""The checks behind docs/research/history.md#before-10 ("What this shows"): why Depth-Q-Net steered
+towards walls on our data.
 
     python -m research.investigation runs/quick/data
 
@@ -11,8 +11,8 @@ walls on our data.
    the dataset's own canyons) against the slope of next-step depth on the action in the OU data.
 
 A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
-docs/results.md#before-10 came from the code of commit 396f92d (2026-11-23: the last change of that
-page's tables).
+docs/research/history.md#before-10 came from the code of commit 396f92d
+(2026-11-23: the last change of those tables).
 """
 
 from __future__ import annotations

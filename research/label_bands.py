@@ -10,8 +10,8 @@ this writes OUT/bands/<band>_<split>/data (OUT/floor/data hard-linked, its label
 and eval/, as the camera-label experiment lays them out, and prints that experiment's rows for them.
 
 A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
-docs/results.md came from the code of commit 05758a2 (2026-11-26: the last change of that page's
-tables).
+docs/research/camera_labels.md came from the code of commit 05758a2
+(2026-11-26: the last change of those tables).
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ simulated dataset of its camera (its LiDAR is the truth here; nothing is written
 own readings are computed once; only the memory differs between the rows.
 
 A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
-docs/results.md came from the code of commit 98b6acc (2026-11-26: the last change of that page's
-tables).
+docs/research/camera_labels.md came from the code of commit 98b6acc
+(2026-11-26: the last change of those tables).
 """
 
 from __future__ import annotations

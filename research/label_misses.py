@@ -12,8 +12,8 @@ DATA is a dataset with camera labels (`depthq label DATA --from camera`) collect
 canyons (a robot's recording has none to re-simulate).
 
 A finished investigation (research/, not in the wheel; run from a checkout's root). Its numbers in
-docs/results.md came from the code of commit 98b6acc (2026-11-26: the last change of that page's
-tables).
+docs/research/camera_labels.md came from the code of commit 98b6acc
+(2026-11-26: the last change of those tables).
 """
 
 from __future__ import annotations

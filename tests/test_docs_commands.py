@@ -1,7 +1,7 @@
 """The commands of the user docs work as written: each `depthq` line of the bash blocks of Getting
 started, then of each guide and network page, runs in order in one folder at toy size (flags appended
 that shrink it: argparse takes a flag's last value), and writes what the next line reads; a long job
-(`reproduce`) has its flags parsed only."""
+(`reproduce`, `sweep`) has its flags parsed only."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ TOY = {
     "drive": ["--time-limit-s", "3"],
     "labeller": ["--steps", "2", "--batch-size", "4"],
 }
-PARSED_ONLY = {"reproduce"}  # long jobs; the smoke preset itself runs in tests/test_reproduce.py
+PARSED_ONLY = {"reproduce", "sweep"}  # long jobs; the smoke preset itself runs in tests/test_reproduce.py
 
 
 def _commands(page: Path) -> list[list[str]]:
