@@ -4,6 +4,7 @@ looks (issue #45 item 3).
     python -m depthq.experiments.looks figure [DOCS]          # DOCS/looks.png (default docs/)
     python -m depthq.experiments.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
     python -m depthq.experiments.looks table OUT [--runs 500] [--seeds 0-2]
+    python -m depthq.experiments.looks report OUT [--runs 500] [--seeds 0-2]   # OUT/report.md, .html
 
 `run` (resumed: every step is skipped when its output is complete), per training look L (default
 colours, textured), hard canyons:
@@ -16,8 +17,17 @@ colours, textured), hard canyons:
     OUT/<L>/eval_<D>/<net>_s<S>/  every net (depth, camera, coll) driven in look D (default colours,
                                textured, heldout) in `--canyons`
 
+then, per driving look D:
+
+    OUT/val_<D>/data/          `--val-runs` validation runs in look D (val canyons, seed VAL_SEED)
+    OUT/val_<D>/<method>_<L>.json  the labeller trained in L measured there against the LiDAR's bins
+
 `table` prints, per net and training look, the distance to the first collision (mean [95 %
-interval] over seeds) in each driving look, and each look's share of the training look's.
+interval] over seeds) in each driving look, and each look's share of the training look's; then per
+training look its labeller's nearest-bin error in each driving look. `report` writes both, the
+held-out look's cost to the colour-trained nets beside what textured training gives back (paired by
+seed), the issue's two "done when" answers and the same pose in every look (OUT/looks.png) into
+OUT/report.md and OUT/report.html.
 """
 
 from __future__ import annotations
