@@ -24,7 +24,7 @@ TOY = [
 ]
 
 
-@pytest.mark.slow  # a toy sweep, a labeller, 3 trainings, 8 evaluations of one short run, 3 val runs: ~1 min
+@pytest.mark.slow  # a toy sweep, a labeller, 3 trainings, 8 evaluations, 3 val runs, the report: ~2 min
 def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "looks"
     assert looks.main(["run", str(out), *TOY]) == 0
