@@ -310,6 +310,7 @@ def error_cell(summary: dict[str, float | None]) -> str:
 
 
 def read_stats(folder: Path) -> dict[str, Any] | None:
+    """OUT/<method>/stats.json (`write_stats`); None before it is written."""
     path = folder / "stats.json"
     return read_json(path) if path.is_file() else None
 
