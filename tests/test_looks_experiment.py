@@ -1,26 +1,30 @@
 """The looks experiment (issue #45 item 3) at toy size: a sweep in the textured look, a floor labeller's
-camera-label Depth-Q-Net, every net driven in two looks, the table; the same command resumes."""
+camera-label Depth-Q-Net, every net driven in another look, the labeller measured in it, the tables and
+the report; the same command resumes."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from depthq.data.manifest import Dataset
 from depthq.experiments import looks
 
 TOY = [
     "--preset", "smoke", "--runs", "3", "--seeds", "0", "--train-looks", "textured",
     "--drive-looks", "heldout", "--canyons", "hard/val:1001", "--choose", "hard/val:1000",
-    "--method", "floor", "--time-limit", "2", "--workers", "1", "--device", "cpu", "--no-progress",
+    "--method", "floor", "--time-limit", "2", "--val-runs", "2", "--workers", "1", "--device", "cpu",
+    "--no-progress",
     *("--labeller-set", "steps=5", "--labeller-set", "pool_runs=2", "--labeller-set", "pool_frames=3",
       "--labeller-set", "batch_size=4", "--labeller-set", "width=8"),
     *("--set", "epochs=1", "--set", "train_batches=2", "--set", "val_batches=1", "--set", "batch_size=8"),
 ]
 
 
-@pytest.mark.slow  # a toy sweep, a labeller, 3 trainings, 8 evaluations of one short run: ~1 min
+@pytest.mark.slow  # a toy sweep, a labeller, 3 trainings, 8 evaluations, 3 val runs, the report: ~2 min
 def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tmp_path: Path, capsys) -> None:
     out = tmp_path / "looks"
     assert looks.main(["run", str(out), *TOY]) == 0
@@ -29,13 +33,68 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     for net in ("depth", "camera", "coll"):  # trained in the textured look, driven in the held-out one
         summary = json.loads((out / "textured" / "eval_heldout" / f"{net}_s0" / "summary.json").read_text())
         assert summary["look"] == "heldout" and summary["config"]["canyons"] == ["hard/val:1001"]
+    # the labeller measured on validation runs of the driving look: its own seed, val canyons, that look
+    val = Dataset.open(out / "val_heldout" / "data")
+    assert val.seed == looks.VAL_SEED and val.config["env"]["world"]["look"] == "heldout"
+    assert len(val.entries("val")) >= 2 and {e.split for e in val.entries()} == {"train", "val"}
+    error = json.loads(looks.error_path(out, "textured", "heldout", "floor").read_text())
+    assert error["name"] == "floor" and error["split"] == "val" and error["runs"] == len(val.entries("val"))
+    assert 0 < error["frames"] <= sum(e.n_frames for e in val.entries("val"))
+    assert error["nearest"]["median"] is not None and error["nearest"]["median"] >= 0
     printed = capsys.readouterr().out
     assert "| Depth-Q-Net, camera labels | textured |" in printed
-    stamps = {p: p.stat().st_mtime_ns for p in out.rglob("summary.json")}
-    assert looks.main(["run", str(out), *TOY]) == 0  # resumed: no evaluation again
-    assert {p: p.stat().st_mtime_ns for p in out.rglob("summary.json")} == stamps
+    assert f"| floor, trained in textured | {_cell(out)} |" in printed  # the second table: per look
+    def stamps() -> dict[Path, int]:  # evaluations, the validation runs' manifest, the labeller's errors
+        return {p: p.stat().st_mtime_ns for p in [*out.rglob("summary.json"), *out.glob("val_*/**/*.json")]}
+
+    before = stamps()
+    assert looks.main(["run", str(out), *TOY]) == 0  # resumed: no evaluation, collection or measurement again
+    assert stamps() == before
     assert looks.main(["run", str(tmp_path / "bad"), *TOY, "--drive-looks", "neon"]) == 2
     assert not (tmp_path / "bad").exists()
+
+    # the report: the tables, the figure, the issue's answers computed from the evaluations
+    seeds = ["--runs", "3", "--seeds", "0", "--train-looks", "textured", "--drive-looks", "heldout"]
+    assert looks.main(["report", str(out), *seeds, "--method", "floor"]) == 0
+    text = (out / "report.md").read_text()
+    assert "| Depth-Q-Net, camera labels | textured |" in text and "| floor, trained in textured |" in text
+    assert (out / "looks.png").is_file() and "data:image/png;base64," in (out / "report.html").read_text()
+    # never driven in the textured look: the first question is open, the second one is answered
+    first, second = (line for line in text.splitlines() if line.startswith("- Does"))
+    assert "**not yet measured**" in first
+    camera, coll = (json.loads((out / "textured" / "eval_heldout" / f"{net}_s0" / "summary.json").read_text())
+                    ["summary"]["distance_to_collision_mean"] for net in ("camera", "coll"))
+    assert f"**{'yes' if camera >= coll else 'no'}**" in second and f"{camera - coll:+.2f}" in second
+
+
+def _cell(out: Path) -> str:
+    """The labeller's own training runs' nearest-bin error, as its camera-labels stats hold it."""
+    stats = json.loads((out / "textured" / "camera" / "floor" / "stats.json").read_text())
+    nearest = stats["camera_labels"]["splits"]["train"]["nearest"]
+    return f"{nearest['median']:.3f} [{nearest['mean']:.3f}]"
+
+
+def test_the_looks_report_says_not_yet_measured_for_what_is_missing(tmp_path: Path) -> None:
+    """An experiment folder without evaluations or labellers: every answer "not yet measured", every cell
+    empty, no error; a folder that does not exist is a clear error (exit 2) and nothing is written."""
+    first, second = looks.answers(tmp_path)
+    assert "**not yet measured**" in first and "**not yet measured**" in second
+    for rows in (looks.table_rows(tmp_path), looks.transfer_rows(tmp_path), looks.labeller_rows(tmp_path)):
+        assert rows and all(cell == "–" for row in rows for key, cell in row.items()
+                            if key not in ("Q-net", "trained in", "labeller"))
+    assert looks.main(["report", str(tmp_path / "none")]) == 2
+    assert not (tmp_path / "none").exists()
+
+
+def test_the_labeller_error_is_the_camera_labels_metric() -> None:
+    """One function measures the labels (`depthq.data.stats.label_errors`): the report's cell is its
+    nearest-bin median [mean]."""
+    from depthq.data.stats import label_errors
+    from depthq.experiments.camera_labels import error_cell
+
+    lidar = np.array([[1.0, 2.0], [0.5, np.nan]])
+    errors = label_errors(lidar, lidar + 0.25, runs=1)
+    assert error_cell(errors["nearest"]) == "0.250 [0.250]"
 
 
 def test_the_looks_experiment_trains_with_its_pinned_configs() -> None:

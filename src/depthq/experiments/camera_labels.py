@@ -295,20 +295,22 @@ def _summaries(folder: Path, runs: int, seeds: tuple[int, ...], net: str = "dept
     return found
 
 
-def _error_cells(stats: dict[str, Any] | None) -> list[str]:
+def error_cells(stats: dict[str, Any] | None) -> list[str]:
     """The labels' error on the training runs (the labels the Depth-Q-Nets learn from): nearest bin,
     then each LiDAR distance band, median [mean] m."""
     split = ((stats or {}).get("camera_labels") or {}).get("splits", {}).get("train")
     if split is None:
         return ["–"] * (1 + len(ERROR_BANDS))
-
-    def cell(summary: dict[str, float | None]) -> str:
-        return "–" if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
-
-    return [cell(split["nearest"]), *(cell(b) for b in split["bands"])]
+    return [error_cell(split["nearest"]), *(error_cell(b) for b in split["bands"])]
 
 
-def _stats(folder: Path) -> dict[str, Any] | None:
+def error_cell(summary: dict[str, float | None]) -> str:
+    """An absolute error's 'median [mean]' (m) of `depthq.data.stats.label_errors`; '–' for none."""
+    return "–" if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
+
+
+def read_stats(folder: Path) -> dict[str, Any] | None:
+    """OUT/<method>/stats.json (`write_stats`); None before it is written."""
     path = folder / "stats.json"
     return read_json(path) if path.is_file() else None
 
@@ -349,9 +351,9 @@ def table(
         if evaluate_missing:
             evaluate_references(out, setup, runs, seeds, workers, device, progress)
         where = [f"{setup.family} (`{Path(setup.sweep).name}`)", setup.canyons]
-        lidar, none = _summaries(out / LIDAR / "eval", runs, seeds), _error_cells(None)
+        lidar, none = _summaries(out / LIDAR / "eval", runs, seeds), error_cells(None)
         rows = [(f"Depth-Q-Net, camera labels: {_labeller_name(out / m)}",
-                 _summaries(out / m / "eval", runs, seeds), _error_cells(_stats(out / m)), True)
+                 _summaries(out / m / "eval", runs, seeds), error_cells(read_stats(out / m)), True)
                 for m in METHODS if (out / m).is_dir()]
         rows += [("Depth-Q-Net, LiDAR labels", lidar, none, False),
                  ("Coll-Q-Net", _summaries(out / LIDAR / "eval", runs, seeds, "coll"), none, False)]

@@ -4,6 +4,7 @@ looks (issue #45 item 3).
     python -m depthq.experiments.looks figure [DOCS]          # DOCS/looks.png (default docs/)
     python -m depthq.experiments.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
     python -m depthq.experiments.looks table OUT [--runs 500] [--seeds 0-2]
+    python -m depthq.experiments.looks report OUT [--runs 500] [--seeds 0-2]   # OUT/report.md, .html
 
 `run` (resumed: every step is skipped when its output is complete), per training look L (default
 colours, textured), hard canyons:
@@ -16,13 +17,23 @@ colours, textured), hard canyons:
     OUT/<L>/eval_<D>/<net>_s<S>/  every net (depth, camera, coll) driven in look D (default colours,
                                textured, heldout) in `--canyons`
 
+then, per driving look D:
+
+    OUT/val_<D>/data/          `--val-runs` validation runs in look D (val canyons, seed VAL_SEED)
+    OUT/val_<D>/<method>_<L>.json  the labeller trained in L measured there against the LiDAR's bins
+
 `table` prints, per net and training look, the distance to the first collision (mean [95 %
-interval] over seeds) in each driving look, and each look's share of the training look's.
+interval] over seeds) in each driving look, and each look's share of the training look's; then per
+training look its labeller's nearest-bin error in each driving look. `report` writes both, the
+held-out look's cost to the colour-trained nets beside what textured training gives back (paired by
+seed), the issue's two "done when" answers and the same pose in every look (OUT/looks.png) into
+OUT/report.md and OUT/report.html.
 """
 
 from __future__ import annotations
 
 import argparse
+import html
 import json
 import sys
 from dataclasses import asdict, replace
@@ -31,19 +42,27 @@ from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw
+from tqdm import tqdm
 
+from depthq.configio import atomic_write_bytes, read_json, write_json
+from depthq.data.manifest import Dataset
+from depthq.data.recorder import CollectConfig, collect, collection_complete
+from depthq.data.stats import label_errors
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
 from depthq.flags import build_config
-from depthq.labellers.labeller import LabellerConfig
+from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
+from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
 from depthq.nets.checkpoint import CONFIG
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import Model, Settings, Sweep, parse_ints, retarget, widened
+from depthq.report import html as page
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, mean_interval
+from depthq.report.tables import markdown
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
@@ -56,6 +75,14 @@ TRAIN_LOOKS = (COLOURS, TEXTURED)
 DRIVE_LOOKS = (COLOURS, TEXTURED, HELDOUT)
 CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment make their choices
 NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
+# The labellers are measured in every driving look on OUT/val_<look>/data: VAL_RUNS validation runs (in
+# the `val` canyons, as a dataset's val split) collected with VAL_SEED, a seed no sweep collects with
+# (sweeps draw their OU and sensor noise from seed 0), so no frame is one a labeller or net learnt on.
+VAL_RUNS, VAL_SEED = 20, 1000
+# The issue's "done when" (#45): the camera-label Depth-Q-Net trained in the textured look keeps this
+# share of its textured distance in the held-out look, and drives there at least as far as Coll-Q-Net.
+DONE_SHARE = 0.9
+NOT_MEASURED = "not yet measured"
 
 # Every setting the experiment's nets train with (TrainConfig field paths; "lr" the effective rate),
 # as the `hard` preset and the defaults of commit 0ab0c20 gave them, where the run behind
@@ -175,17 +202,69 @@ def checkpoints(out: Path, look: str, runs: int, seed: int, method: str) -> dict
             "coll": out / look / "sweep" / "models" / model_name("coll", runs, seed)}
 
 
+def val_collect(preset: str, look: str, val_runs: int = VAL_RUNS) -> CollectConfig:
+    """The validation set of a driving look: the preset's collection in the hard family and `look`
+    (the training data's robot, camera and exploration), `val_runs` val runs seeded by VAL_SEED (and
+    the one training run a dataset needs, never used)."""
+    sweep = retarget(get_preset(preset), family="hard", look=look)
+    return replace(sweep.collect, runs=1, val_runs=val_runs, seed=VAL_SEED)
+
+
+def labeller_error(labeller: Path, data: Path, split: str = "val", progress: bool = True) -> dict[str, Any]:
+    """The labeller in folder `labeller` measured on a dataset's `split` (its frames labelled in memory,
+    nothing written): `depthq.data.stats.label_errors` against the LiDAR's bins, and what was measured."""
+    loaded, dataset = load_labeller(labeller), Dataset.open(data)
+    check_applicable(loaded, dataset)
+    entries = dataset.entries(split)
+    if not entries:
+        raise ConfigError(f"{data} has no {split} runs to measure the labeller {labeller} on")
+    lidar, camera = [], []
+    bar = tqdm(entries, desc=f"labeller on {Path(data).parent.name}", unit="run", disable=not progress)
+    for entry in bar:
+        one = dataset.read_run(entry, images=True)
+        lidar.append(one.bins)
+        camera.append(loaded.estimate(one))
+    return {"labeller": str(labeller), "name": loaded.record["name"], "fingerprint": loaded.fingerprint,
+            "data": str(data), "data_fingerprint": dataset.fingerprint(), "split": split,
+            **label_errors(np.concatenate(lidar), np.concatenate(camera), len(entries))}
+
+
+def error_path(out: Path, look: str, drive: str, method: str) -> Path:
+    """Where the error of the `method` labeller trained in `look`, measured in `drive`, is kept."""
+    return Path(out) / f"val_{drive}" / f"{method}_{look}.json"
+
+
+def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], drive_looks: tuple[str, ...],
+                      method: str, val_runs: int = VAL_RUNS, workers: int = 2, progress: bool = True) -> None:
+    """Each driving look's validation set collected into OUT/val_<look>/data, and each training look's
+    labeller measured on it (resumed: a finished collection or measurement is kept)."""
+    for drive in drive_looks:
+        data, config = Path(out) / f"val_{drive}" / "data", val_collect(preset, drive, val_runs)
+        if not collection_complete(data, config):
+            print(f"validation runs in the {drive} look → {data}", flush=True)
+            collect(data, config, workers=workers, progress=progress)
+        for look in train_looks:
+            labeller = Path(out) / look / "camera" / method / "labeller"
+            path = error_path(out, look, drive, method)
+            if path.is_file() or not (labeller / LABELLER_CONFIG).is_file():
+                continue
+            print(f"labeller {labeller} in the {drive} look → {path}", flush=True)
+            write_json(path, labeller_error(labeller, data, progress=progress))
+
+
 def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
         canyons: str = "hard/eval", choose: str = CHOOSE, train_looks: tuple[str, ...] = TRAIN_LOOKS,
         drive_looks: tuple[str, ...] = DRIVE_LOOKS, method: str = "monodepth",
         time_limit_s: float | None = None,
         labeller_settings: tuple[tuple[str, Any], ...] = (), training: tuple[tuple[str, Any], ...] = (),
-        workers: int = 2, device: str = "auto", progress: bool = True) -> int:
-    """The experiment into OUT (resumed); then its table."""
+        val_runs: int = VAL_RUNS, workers: int = 2, device: str = "auto", progress: bool = True) -> int:
+    """The experiment into OUT (resumed); then its tables."""
     out = Path(out).resolve()
     for look in (*train_looks, *drive_looks):
         check_look(look)
     driving = EvalConfig(canyons=parse_canyon_set(canyons), time_limit_s=time_limit_s)  # checked up front
+    if val_runs < 1:
+        raise ConfigError(f"--val-runs must be >= 1, got {val_runs}")
     for look in train_looks:
         sweep = retarget(get_preset(preset), family="hard", canyons=choose, look=look)
         if time_limit_s is not None:
@@ -212,32 +291,188 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
                     print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
                     evaluate(str(checkpoint), folder, config, workers=workers, progress=progress,
                              device=device, video=False)
-    print(table(out, runs, seeds, train_looks, drive_looks))
+    measure_labellers(out, preset, train_looks, drive_looks, method, val_runs, workers, progress)
+    print(table(out, runs, seeds, train_looks, drive_looks, method))
     return 0
 
 
-def table(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
-          train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS) -> str:
-    """Markdown: per net and training look, the distance to the first collision in each driving look
-    (mean [95 % interval] over seeds, ends reached in all), and each driving look's mean as a share
-    of the training look's own."""
-    head = ["Q-net", "trained in", *(f"driven in {d}: m (ends)" for d in drive_looks),
-            *(f"{d} / own" for d in drive_looks)]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]
+               ) -> dict[int, dict[str, Any]]:
+    """seed → evaluation summary of `net` trained in `look`, driven in `drive`, where it is written."""
+    folder = Path(out) / look / f"eval_{drive}"
+    found = {seed: evaluation_summary(folder / f"{net}_s{seed}") for seed in seeds}
+    return {seed: summary for seed, summary in found.items() if summary is not None}
+
+
+def _d2c(found: dict[int, dict[str, Any]]) -> list[float]:
+    return [float(s["distance_to_collision_mean"]) for s in found.values()]
+
+
+def table_rows(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+               train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS
+               ) -> list[dict[str, str]]:
+    """Per net and training look, the distance to the first collision in each driving look (mean
+    [95 % interval] over seeds, ends reached in all), and each driving look's mean as a share of the
+    training look's own."""
+    rows = []
     for net, label in NETS.items():
         for look in train_looks:
-            means, cells = {}, []
+            means, row = {}, {"Q-net": label, "trained in": look}
             for drive in drive_looks:
-                found = [s for seed in seeds
-                         if (s := evaluation_summary(Path(out) / look / f"eval_{drive}" / f"{net}_s{seed}"))]
-                values = [s["distance_to_collision_mean"] for s in found]
+                found = _distances(out, net, look, drive, seeds)
+                values = _d2c(found)
                 means[drive] = float(np.mean(values)) if values else None
-                ends = sum(int(s["successes"]) for s in found)
-                cells.append(f"{mean_interval(values, '.2f', len(seeds))} ({ends})" if values else "–")
+                ends = sum(int(s["successes"]) for s in found.values())
+                row[f"driven in {drive}: m (ends)"] = (f"{mean_interval(values, '.2f', len(seeds))} ({ends})"
+                                                       if values else "–")
             own = means.get(look)
-            shares = [f"{means[d] / own:.0%}" if own and means[d] is not None else "–" for d in drive_looks]
-            lines.append("| " + " | ".join([label, look, *cells, *shares]) + " |")
-    return "\n".join(lines)
+            for drive in drive_looks:
+                share = means[drive] / own if own and means[drive] is not None else None
+                row[f"{drive} / own"] = "–" if share is None else f"{share:.0%}"
+            rows.append(row)
+    return rows
+
+
+def table(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+          train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS,
+          method: str = PINNED_METHOD) -> str:
+    """Markdown: the nets' table (`table_rows`), then the labellers' (`labeller_rows`)."""
+    return (markdown(table_rows(out, runs, seeds, train_looks, drive_looks)) + "\n"
+            + markdown(labeller_rows(out, train_looks, drive_looks, method)))
+
+
+def labeller_rows(out: Path, train_looks: tuple[str, ...] = TRAIN_LOOKS,
+                  drive_looks: tuple[str, ...] = DRIVE_LOOKS, method: str = PINNED_METHOD
+                  ) -> list[dict[str, str]]:
+    """Per training look, its labeller's nearest-bin error against the LiDAR (median [mean] m, as
+    the camera-labels experiment reports it): on the training runs it labelled, then on each driving
+    look's validation runs (OUT/val_<look>)."""
+    rows = []
+    for look in train_looks:
+        stats = camera_labels.read_stats(Path(out) / look / "camera" / method)
+        row = {"labeller": f"{method}, trained in {look}",
+               "its training runs: nearest bin, m": camera_labels.error_cells(stats)[0]}
+        for drive in drive_looks:
+            path = error_path(out, look, drive, method)
+            record = read_json(path) if path.is_file() else None
+            row[f"{drive} val runs: nearest bin, m"] = (
+                f"{camera_labels.error_cell(record['nearest'])} ({record['frames']} frames)"
+                if record else "–")
+        rows.append(row)
+    return rows
+
+
+def _paired(first: dict[int, dict[str, Any]], second: dict[int, dict[str, Any]]) -> tuple[str, list[float]]:
+    """second − first, paired by seed over the seeds both have: 'mean [95 % interval] (seeds)'."""
+    both = sorted(set(first) & set(second))
+    diff = [float(second[s]["distance_to_collision_mean"] - first[s]["distance_to_collision_mean"])
+            for s in both]
+    return (f"{mean_interval(diff, '+.2f')} (seeds {','.join(map(str, both))})" if diff else "–"), diff
+
+
+def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COLOURS,
+                  randomised: str = TEXTURED, heldout: str = HELDOUT) -> list[dict[str, str]]:
+    """Per net, what the held-out look costs the nets trained in the `flat` look (held-out − own,
+    paired by seed) beside what training in the `randomised` look gives back there (randomised −
+    flat training, both driven in the held-out look, paired by seed); m to the first collision."""
+    rows = []
+    for net, label in NETS.items():
+        own, away = _distances(out, net, flat, flat, seeds), _distances(out, net, flat, heldout, seeds)
+        back = _distances(out, net, randomised, heldout, seeds)
+        loss, lost = _paired(own, away)
+        gain, gained = _paired(away, back)
+        share = (f"{np.mean(gained) / -np.mean(lost):.0%}" if lost and gained and np.mean(lost) < 0 else "–")
+        rows.append({
+            "Q-net": label,
+            f"trained {flat}, driven {flat}: m": mean_interval(_d2c(own), ".2f", len(seeds)),
+            f"trained {flat}, driven {heldout}: m": mean_interval(_d2c(away), ".2f", len(seeds)),
+            f"{heldout} − {flat}, paired: m": loss,
+            f"trained {randomised}, driven {heldout}: m": mean_interval(_d2c(back), ".2f", len(seeds)),
+            f"{randomised} − {flat} training in {heldout}, paired: m": gain,
+            "share of the loss given back": share,
+        })
+    return rows
+
+
+def answers(out: Path, seeds: tuple[int, ...] = (0, 1, 2), randomised: str = TEXTURED, heldout: str = HELDOUT
+            ) -> list[str]:
+    """The issue's two "done when" questions of the camera-label Depth-Q-Net trained in the
+    `randomised` look, answered from OUT's evaluations ("not yet measured" where they are missing)."""
+    camera = _distances(out, "camera", randomised, heldout, seeds)
+    own = _distances(out, "camera", randomised, randomised, seeds)
+    coll = _distances(out, "coll", randomised, heldout, seeds)
+    where = f"{Path(out) / randomised}/eval_…/*_s<seed>"
+    first = f"Does the camera-label Depth-Q-Net trained {randomised} drive the {heldout} look at ≥ " \
+            f"{DONE_SHARE:.0%} of its distance in the {randomised} look? "
+    both = sorted(set(camera) & set(own))
+    if both:
+        there, here = ([float(d[s]["distance_to_collision_mean"]) for s in both] for d in (camera, own))
+        share = np.mean(there) / np.mean(here)
+        first += (f"**{'yes' if share >= DONE_SHARE else 'no'}**: {share:.0%} "
+                  f"({mean_interval(there, '.2f')} m against {mean_interval(here, '.2f')} m, "
+                  f"seeds {','.join(map(str, both))} of {len(seeds)}).")
+    else:
+        first += f"**{NOT_MEASURED}** (no seed evaluated in both looks under {where})."
+    second = f"Does it drive the {heldout} look at least as far as Coll-Q-Net trained on the same data? "
+    text, diff = _paired(coll, camera)
+    if diff:
+        ahead = sum(d >= 0 for d in diff)
+        second += (f"**{'yes' if np.mean(diff) >= 0 else 'no'}**: camera-label Depth-Q-Net − Coll-Q-Net "
+                   f"{text} m; at least as far in {ahead} of {len(diff)} seeds.")
+    else:
+        second += f"**{NOT_MEASURED}** (no seed with both nets evaluated under {where})."
+    return [first, second]
+
+
+def _canyons(out: Path) -> str:
+    """The canyons OUT's evaluations drove in, from the first one found ("not yet measured" for none)."""
+    for path in sorted(Path(out).glob("*/eval_*/*/summary.json")):
+        canyons = read_json(path)["config"]["canyons"]
+        return f"{len(canyons)} canyons, {canyons[0]} … {canyons[-1]}" if len(canyons) > 1 else canyons[0]
+    return NOT_MEASURED
+
+
+def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+           train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS,
+           method: str = PINNED_METHOD) -> Path:
+    """OUT/report.md and the self-contained OUT/report.html, from what OUT holds: the issue's answers,
+    the nets' table, the held-out look's cost and what textured training gives back, the labellers'
+    errors per look, the same pose in every look (OUT/looks.png, drawn once)."""
+    out = Path(out)
+    if not out.is_dir():
+        raise ConfigError(f"{out}: no such folder (make it with `{PROG} run {out}`)")
+    if not (out / "looks.png").is_file():
+        figure(out / "looks.png")
+    intro = (f"{runs} training runs per net, seeds {','.join(map(str, seeds))}; driven in: {_canyons(out)}. "
+             "Distance to the first collision, mean [95 % Student-t interval] over seeds; "
+             "paired differences by training seed. The issue asks its answers of the hard `eval` canyons, "
+             "500 runs, 3 seeds.")
+    sections = [
+        ("Done when (issue #45)", answers(out, seeds), None),
+        ("Every net × training look × driving look", [],
+         table_rows(out, runs, seeds, train_looks, drive_looks)),
+        ("The held-out look's cost, and what textured training gives back", [], transfer_rows(out, seeds)),
+        ("The labellers' error per look", [f"The {method} labeller trained in each look against the LiDAR's "
+                                           "bins: median [mean] absolute error of each frame's nearest bin."],
+         labeller_rows(out, train_looks, drive_looks, method)),
+    ]
+    pose = "The same pose in every look"
+    lines = [f"# The looks experiment: {out.name}", "", intro, ""]
+    for title, texts, rows in sections:
+        lines += [f"## {title}", ""]
+        if rows is None:
+            lines += [*(f"- {t}" for t in texts), ""]
+        else:
+            lines += [*(f"{t}\n" for t in texts), markdown(rows)]
+    lines += [f"## {pose}", "", f"![{pose}](looks.png)", ""]
+    atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
+    html_sections = [(title, "".join(f"<p>{html.escape(t.replace('**', ''))}</p>" for t in texts)
+                      + (page.table(rows) if rows is not None else "")) for title, texts, rows in sections]
+    html_sections[0] = (html_sections[0][0], f"<p>{html.escape(intro)}</p>" + html_sections[0][1])
+    html_sections.append((pose, page.img(out / "looks.png", pose.lower())))
+    atomic_write_bytes(out / "report.html", page.render(f"depthq looks experiment — {out.name}",
+                                                        html_sections).encode())
+    return out / "report.md"
 
 
 def _looks(text: str) -> tuple[str, ...]:
@@ -255,11 +490,14 @@ def main(argv: list[str] | None = None) -> int:
     common.add_argument("--seeds", default="0-2", help="training seeds (default: 0-2)")
     common.add_argument("--train-looks", default=",".join(TRAIN_LOOKS), help="looks the nets learn in")
     common.add_argument("--drive-looks", default=",".join(DRIVE_LOOKS), help="looks every net drives in")
+    common.add_argument("--method", default=PINNED_METHOD,
+                        help=f"the camera labeller (default: {PINNED_METHOD})")
     go = actions.add_parser("run", parents=[common], help="sweeps, camera labels, evaluations (resumed)")
     go.add_argument("--preset", default="hard", help="the sweep preset the training follows (default: hard)")
     go.add_argument("--canyons", default="hard/eval", help="the canyons of the table (default: hard/eval)")
     go.add_argument("--choose", default=CHOOSE, help=f"the canyons of every choice (default: {CHOOSE})")
-    go.add_argument("--method", default="monodepth", help="the camera labeller (default: monodepth)")
+    go.add_argument("--val-runs", type=int, default=VAL_RUNS,
+                    help=f"validation runs per driving look, the labellers' test (default: {VAL_RUNS})")
     go.add_argument("--time-limit", type=float, default=None, help="seconds per evaluation run")
     go.add_argument("--labeller-set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a LabellerConfig setting, as camera_labels takes it; repeatable")
@@ -268,7 +506,9 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--workers", type=int, default=2, help="processes per evaluation (default: 2)")
     go.add_argument("--device", default="auto", help="torch device (default: auto)")
     go.add_argument("--no-progress", action="store_true", help="no progress bars")
-    actions.add_parser("table", parents=[common], help="the Markdown table of what OUT holds")
+    actions.add_parser("table", parents=[common], help="the Markdown tables of what OUT holds")
+    actions.add_parser("report", parents=[common],
+                       help="OUT/report.md and OUT/report.html: the tables, the issue's answers, the figure")
     args = parser.parse_args(argv)
 
     def work() -> int:
@@ -279,13 +519,17 @@ def main(argv: list[str] | None = None) -> int:
         seeds = parse_ints(args.seeds, "--seeds")
         train_looks, drive_looks = _looks(args.train_looks), _looks(args.drive_looks)
         if args.action == "table":
-            print(table(args.out, args.runs, seeds, train_looks, drive_looks))
+            print(table(args.out, args.runs, seeds, train_looks, drive_looks, args.method))
+            return 0
+        if args.action == "report":
+            print(f"wrote {report(args.out, args.runs, seeds, train_looks, drive_looks, args.method)}")
             return 0
         return run(args.out, preset=args.preset, runs=args.runs, seeds=seeds, canyons=args.canyons,
                    choose=args.choose, train_looks=train_looks, drive_looks=drive_looks, method=args.method,
                    time_limit_s=args.time_limit,
                    labeller_settings=camera_labels.parse_settings(args.labeller_set, "--labeller-set"),
-                   training=camera_labels.parse_settings(args.set, "--set"), workers=args.workers,
+                   training=camera_labels.parse_settings(args.set, "--set"), val_runs=args.val_runs,
+                   workers=args.workers,
                    device=args.device, progress=not args.no_progress)
 
     return guarded(PROG, work)
