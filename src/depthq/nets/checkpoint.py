@@ -1,5 +1,6 @@
 """The checkpoint format, in one place: config.json (what was trained, for which policy, on which
-data), the weight files and their digests, the format's version, and reading a network back.
+data), the weight files and their digests, the format's version, and reading one back (its network is
+built by `depthq.networks.load_qnet`, which knows the networks).
 
 This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
 `depthq.train.folder`) and `depthq.policies` (which read them), so a policy needs nothing from
@@ -63,13 +64,13 @@ from safetensors.torch import save as save_safetensors
 
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import from_dict, provenance, to_dict
-from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.control.action_selection import ACTIONS
 from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
-from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
-from depthq.nets.trunk import TRUNKS, build_trunk
+from depthq.nets.heads import HeadConfig, QNet
+from depthq.nets.trunk import TRUNKS
 
 CONFIG = "config.json"
 FORMAT = "depthq-checkpoint"
@@ -102,6 +103,8 @@ _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection":
 # first checkpoint on).
 _ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "form": "concat",
                "output_bias": 0.0}
+# The selection rule a record before version 3 acted by, by its head's kind: the two networks there were.
+_LEGACY_RULES = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_probability"}
 # Fields renamed within version 3 (old name → new), as a record written before the rename reads.
 _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 # TrainConfig fields moved into a nested config within version 3 (#33: its sample settings into
@@ -323,7 +326,7 @@ def _upgrade(record: dict[str, Any]) -> dict[str, Any]:
             "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
             "frame_size": [camera["height"], camera["width"]],
             "actions": list(ACTIONS),
-            "rule": RULE_OF.get(kind, ""),
+            "rule": _LEGACY_RULES.get(kind, ""),
             "bins": (env or {}).get("bins"),
         },
     }
@@ -344,10 +347,11 @@ def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Pa
         raise ConfigError(f"{path}: weights do not fit the network of its config.json ({err})") from err
 
 
-def load_qnet(
+def read_checkpoint(
     folder: Path, weights: str | None = None, model: str | None = None, trunk: str | None = None
-) -> tuple[QNet, dict[str, Any]]:
-    """The trained network in `folder` in eval mode, and its config.json (`read_config`).
+) -> tuple[dict[str, Any], dict[str, torch.Tensor], Path]:
+    """A checkpoint folder's config.json (`read_config`), the tensors of its weights and their file;
+    `depthq.networks.load_qnet` builds the network from them.
 
     `weights` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.weights`).
     `model` / `trunk`, when given, must be what the folder holds. A missing, incomplete or corrupted
@@ -361,7 +365,7 @@ def load_qnet(
     record = read_config(folder)
     head = record.get("head")
     kind = head.get("kind") if isinstance(head, dict) else None
-    if kind not in HEAD_KINDS:
+    if not isinstance(kind, str) or not kind:
         raise ConfigError(f"{folder / CONFIG}: unknown model kind {kind!r}")
     for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
         if asked is not None and asked != held:
@@ -379,6 +383,4 @@ def load_qnet(
             why = "no epoch finished yet?"
         raise ConfigError(f"{folder}: no {path.name} for weights {chosen!r} ({why})")
     tensors, _ = read_weights(path)
-    net = QNet(build_trunk(str(record.get("trunk"))), build_head(from_dict(HeadConfig, head)))
-    load_trainable_state(net, tensors, path)
-    return net.eval(), record
+    return record, tensors, path

@@ -14,7 +14,6 @@ from typing import Any
 
 from depthq.train.config import MOVED_SETTINGS
 
-NETS = ("depth", "coll")
 # Settings renamed or moved since sweeps named model folders after them: the new name → the name
 # folders keep, so a sweep finds and reuses the folders trained before (`--set weights=final` is
 # depth_n200_s0_selectfinal, as `--set select=final` was; `--set samples.horizon=2` is
