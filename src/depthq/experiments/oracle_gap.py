@@ -44,7 +44,7 @@ from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
 from depthq.experiments.cells import mean_interval, ranks_driving
 from depthq.experiments.cli import guarded
-from depthq.nets.checkpoint import load_qnet
+from depthq.networks import load_qnet
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.sweep import (

@@ -1,4 +1,4 @@
-"""The networks (docs/design.md#networks): each a `Network` registered by name, owning what differs
+"""The networks: each a `Network` registered by name, owning what differs
 between networks (its training, metric, rule, export and drawing), so that every layer above asks the
 registry (`get_network`) instead of testing a network's name. Importing this package registers
 Depth-Q-Net ("depth") and Coll-Q-Net ("coll"); a user's network registers with `register_network`."""

@@ -1,4 +1,4 @@
-"""What a network is (docs/design.md#networks): one class per network, registered by name
+"""What a network is: one class per network, registered by name
 (`depthq.networks.registry`), owning everything that differs between networks, so that the trainer,
 the policies, evaluation, export, the report and the sweeps ask it rather than test its name.
 

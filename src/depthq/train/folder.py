@@ -26,7 +26,7 @@ a killed training's temporaries are removed when it resumes):
     tb/                      TensorBoard event files (a log: appended, purged of stale epochs on resume)
 
 Weights are safetensors, never pickles, each carrying the SHA-256 of its tensor bytes; reading a
-checkpoint back (`depthq.nets.checkpoint.load_qnet`, below both training and policies) checks it.
+checkpoint back (`depthq.networks.load_qnet`, below both training and policies) checks it.
 A policy needs nothing but the folder: config.json records its rate, frame size and actions.
 """
 
