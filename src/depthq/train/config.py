@@ -65,8 +65,7 @@ class TrainConfig:
     `lr` None means the network's own rate (`Network.lr`); read the effective one from `learning_rate`.
     """
 
-    # The network (`depthq.networks`): depth (Depth-Q-Net) or coll (Coll-Q-Net).
-    model: str = field(metadata={CHOICES: network_names})
+    model: str = field(metadata={CHOICES: network_names})  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
     data: str  # the dataset folder (depthq collect --out)
     # The first n usable training runs (the paper's nested subsets); none: all of them.
     runs: int | None = None
