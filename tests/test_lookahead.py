@@ -133,7 +133,7 @@ def test_a_lookahead_head_takes_sequences_and_gives_every_step() -> None:
     with pytest.raises(ConfigError, match=r"expected action sequences \(B, 3\), got \(4,\)"):
         head(torch.randn(4, 64), torch.zeros(4))
     with pytest.raises(ConfigError, match="its lookahead must be 1, got 2"):
-        paper_head("coll", 64, lookahead=2)
+        build_head(paper_head("coll", 64, lookahead=2))
     with pytest.raises(ConfigError, match="lookahead must be a positive integer, got 0"):
         paper_head("depth", 64, lookahead=0)
 

@@ -24,7 +24,6 @@ dict and outputs.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from depthq.errors import ConfigError
+from depthq.nets.losses import LossFn
 from depthq.nets.trunk import Trunk
 
 # "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
@@ -156,7 +156,7 @@ class Head(nn.Module):
 
     def training_loss(
         self, outputs: tuple[torch.Tensor, ...], target: torch.Tensor, current: torch.Tensor | None,
-        loss_fn: Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+        loss_fn: LossFn,
     ) -> torch.Tensor:
         """The training loss of `training_outputs` (float32): the network's `loss_fn` of the output."""
         return loss_fn(outputs[0], target)[0]
@@ -249,7 +249,7 @@ class DepthFirstHead(Head):
 
     def training_loss(
         self, outputs: tuple[torch.Tensor, ...], target: torch.Tensor, current: torch.Tensor | None,
-        loss_fn: Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+        loss_fn: LossFn,
     ) -> torch.Tensor:
         """Each part fitted to its own target: the dynamics by `loss_fn` to the next bins, the
         perception to the current bins (L1 over all of them, invalid as the clip)."""

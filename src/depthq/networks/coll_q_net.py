@@ -10,8 +10,8 @@ import torch
 
 from depthq.control.action_selection import RULES, Selection
 from depthq.nets.heads import CollHead, Head, HeadConfig, probability
-from depthq.nets.losses import coll_bce_loss
-from depthq.networks.network import LossFn, Network, ValuePlot
+from depthq.nets.losses import LossFn, coll_bce_loss
+from depthq.networks.network import Network, ValuePlot
 from depthq.networks.registry import register_network
 
 

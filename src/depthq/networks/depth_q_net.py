@@ -13,8 +13,8 @@ import torch
 from depthq.control.action_selection import RULES, Selection, sequence_scores
 from depthq.errors import ConfigError
 from depthq.nets.heads import DepthFirstHead, DepthHead, Head, HeadConfig
-from depthq.nets.losses import depth_l1_loss, lookahead_l1_loss
-from depthq.networks.network import LossFn, Network, ValuePlot
+from depthq.nets.losses import LossFn, depth_l1_loss, lookahead_l1_loss
+from depthq.networks.network import Network, ValuePlot
 from depthq.networks.registry import register_network
 
 # A one-step Depth-Q-Net's default head form (docs/oracle_gap.md#depth-first: it drives the hard `val`

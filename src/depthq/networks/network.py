@@ -14,7 +14,6 @@ are drawn (`plot`). Subclasses set the class attributes and override what differ
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
@@ -27,8 +26,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
 from depthq.nets.heads import Head, HeadConfig
-
-LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
+from depthq.nets.losses import LossFn
 
 
 @dataclass(frozen=True)

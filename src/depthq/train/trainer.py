@@ -8,7 +8,6 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from depthq.data.views import FrameView
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.heads import Head, QNet
+from depthq.nets.losses import LossFn
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.networks import get_network
@@ -33,8 +33,6 @@ from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
-
-LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 
 
 class DivergedError(ConfigError):
