@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import numpy as np
@@ -28,35 +29,37 @@ from depthq.train.offline_metric import offline_metric
 from depthq.train.trainer import train
 
 
+class Clearance(Network):
+    """A toy network: the clearance one step later (the nearest depth bin at t+1, from the data's bins
+    view), one number per action, mean squared error, the highest wins."""
+
+    name, title, label, colour, lr = "clearance", "Clearance-Net", "CLR", "tab:green", 0.1
+    view, metric, metric_title, loss_title = "bins", "mse", "mse", "squared error (m²)"
+    rule, rule_text = "highest_clearance", "the action whose predicted clearance is highest"
+    maximise, tie_tol, decisive, onnx_output = True, 1e-5, 0.01, "clearance"
+    plot = ValuePlot("bars", "clearance at t+1 (m)", (0.0, 2.2))
+
+    def build_head(self, config):
+        return CollHead(config)  # one number per (frame, action)
+
+    def samples(self, dataset, split, n_runs, config, labels=None):
+        arrays = super().samples(dataset, split, n_runs, config, labels)
+        bins = arrays["target"]  # (S, 26), NaN where no reading
+        return {**arrays, "target": np.where(np.isfinite(bins), bins, DEPTH_CLIP).min(axis=1)}
+
+    def loss_function(self, config):
+        def mse(pred, target):
+            per_sample = (pred - target) ** 2
+            return per_sample.mean(), per_sample
+
+        return mse
+
+
 @pytest.fixture
 def clearance(monkeypatch: pytest.MonkeyPatch) -> Network:
-    """A toy network registered for one test: the clearance one step later (the nearest depth bin at
-    t+1, from the data's bins view), one number per action, mean squared error, the highest wins."""
+    """`Clearance`, registered for one test."""
     monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))  # unregistered after the test
-
-    @register_network
-    class ClearanceNet(Network):
-        name, title, label, colour, lr = "clearance", "Clearance-Net", "CLR", "tab:green", 0.1
-        view, metric, metric_title, loss_title = "bins", "mse", "mse", "squared error (m²)"
-        rule, rule_text = "highest_clearance", "the action whose predicted clearance is highest"
-        maximise, tie_tol, decisive, onnx_output = True, 1e-5, 0.01, "clearance"
-        plot = ValuePlot("bars", "clearance at t+1 (m)", (0.0, 2.2))
-
-        def build_head(self, config):
-            return CollHead(config)  # one number per (frame, action)
-
-        def samples(self, dataset, split, n_runs, config, labels=None):
-            arrays = super().samples(dataset, split, n_runs, config, labels)
-            bins = arrays["target"]  # (S, 26), NaN where no reading
-            return {**arrays, "target": np.where(np.isfinite(bins), bins, DEPTH_CLIP).min(axis=1)}
-
-        def loss_function(self, config):
-            def mse(pred, target):
-                per_sample = (pred - target) ** 2
-                return per_sample.mean(), per_sample
-
-            return mse
-
+    register_network(Clearance)
     return get_network("clearance")
 
 
@@ -67,6 +70,21 @@ def test_the_builtin_networks_are_registered_in_the_papers_order() -> None:
         get_network("value")
     with pytest.raises(ConfigError, match=r"train\.model must be one of"):
         TrainConfig(model="value", data="data")
+
+
+def test_a_packages_network_is_found_by_its_entry_point(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A package declares its network as an entry point (what every process, a worker too, finds)."""
+    monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))
+    monkeypatch.setattr(registry, "_installed", False)
+    point = EntryPoint("clearance", f"{__name__}:Clearance", registry.ENTRY_POINTS)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [point] if group == point.group else [])
+    assert isinstance(get_network("clearance"), Clearance)
+    assert network_names()[-1] == "clearance"
+    monkeypatch.setattr(registry, "_installed", False)
+    broken = EntryPoint("broken", "no_such_module:Net", registry.ENTRY_POINTS)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [broken])
+    with pytest.raises(ConfigError, match=r"network 'broken' .* does not load"):
+        get_network("broken")
 
 
 @pytest.mark.slow
