@@ -1,6 +1,6 @@
-"""What a network is: one class per network, registered by name
-(`depthq.networks.registry`), owning everything that differs between networks, so that the trainer,
-the policies, evaluation, export, the report and the sweeps ask it rather than test its name.
+"""What a network is: one class per network, registered by name (`depthq.networks.registry`), owning
+everything that differs between networks, so that the trainer, the policies, evaluation, export, the
+report and the sweeps ask it rather than test its name.
 
 A `Network` says what it is called (`name`, as checkpoints, sweeps and folders record it; `title`;
 `label`, the report's short name; `colour`), how it trains (`lr`, its default learning rate; the data
