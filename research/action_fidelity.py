@@ -36,7 +36,7 @@ from depthq.configio import from_dict
 from depthq.control.action_selection import ACTIONS, depth_scores
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
-from depthq.nets.checkpoint import load_qnet
+from depthq.networks import load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from research.truth import next_bins
@@ -48,7 +48,7 @@ def fidelity(checkpoint: Path, truth_cache: dict | None = None) -> dict[str, Any
     net, record = load_qnet(checkpoint)
     config = from_dict(TrainConfig, record["train"])
     dataset = Dataset.open(Path(config.data))
-    arrays = view_arrays(dataset, "val", None, "depth", config.samples)
+    arrays = view_arrays(dataset, "val", None, "bins", config.samples)
     truth = next_bins(dataset, "val", arrays["run_id"], arrays["frame_id"], truth_cache)
     features = load_features(dataset, config.trunk, config.input_size, progress=False).gather("val", arrays)
     with torch.no_grad():

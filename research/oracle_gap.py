@@ -44,7 +44,7 @@ from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.nets.checkpoint import load_qnet
+from depthq.networks import load_qnet
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (

@@ -30,15 +30,16 @@ import torch
 from tqdm import tqdm
 
 from depthq.configio import read_json, write_json
-from depthq.control.action_selection import ACTIONS, select_action
+from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.data.views import run_then_frame, view_arrays
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
 from depthq.evaluate.oracle import env_config
-from depthq.nets.heads import HeadConfig, build_head, probability
+from depthq.nets.heads import HeadConfig, probability
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.networks import build_head, get_network
 from depthq.sim.env import COLLISIONS, CanyonEnv
 from depthq.train.config import TrainConfig
 from depthq.train.features import FeatureTable, load_features
@@ -70,7 +71,7 @@ def lidar_table(dataset: Dataset, kind: str) -> FeatureTable:
 def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> torch.nn.Module:
     """`config`'s head trained on `kind` input as `depthq train` trains one on cached features."""
     table = lidar_table(dataset, kind)
-    arrays = view_arrays(dataset, "train", config.runs, net, config.samples)
+    arrays = view_arrays(dataset, "train", config.runs, get_network(net).view, config.samples)
     samples = FeatureSamples(arrays, table, "train")
     torch.manual_seed(config.seed)
     # One step, the action appended, the input unprojected.
@@ -93,7 +94,7 @@ def train_perception(dataset: Dataset, config: TrainConfig) -> torch.nn.Module:
     """A head from the cached image feature to the current frame's 26 bins (invalid as the clip), L1
     over all bins, on the training runs' frames, with `config`'s optimizer and schedule."""
     table = load_features(dataset, config.trunk, config.input_size)
-    arrays = view_arrays(dataset, "train", config.runs, "depth", config.samples)
+    arrays = view_arrays(dataset, "train", config.runs, "bins", config.samples)
     current = lidar_table(dataset, "bins")
     rows = table.rows("train", arrays["run_id"], arrays["frame_id"])
     features = torch.from_numpy(table.features[rows])
@@ -136,7 +137,7 @@ def drive(
                     x = torch.from_numpy(lidar_input(obs["bins"], obs["scan"], kind)).repeat(len(ACTIONS), 1)
                 out = head(x, actions)
                 values = (out if net == "depth" else probability(out)).numpy()
-                action = select_action(net, values, np.array(ACTIONS))
+                action = get_network(net).choose(values, np.array(ACTIONS))
                 obs, _, terminated, truncated, info = env.step([action])
                 done = terminated or truncated
             runs.append({"canyon": canyon, "progress": info["progress"], "end_reason": info["end_reason"]})

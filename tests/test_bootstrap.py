@@ -13,7 +13,7 @@ import torch
 from paper_head import paper_head
 
 from depthq.errors import ConfigError
-from depthq.nets.heads import build_head
+from depthq.networks import build_head
 from depthq.train.bootstrap import bootstrapped_targets, greedy_bins
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train

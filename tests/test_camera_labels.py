@@ -108,11 +108,11 @@ def test_a_labelling_stopped_before_its_manifest_is_resumed(labelled: Path, smal
 def test_an_old_dataset_reads_unchanged_and_refuses_camera_training(small_dataset: Path) -> None:
     dataset = Dataset.open(small_dataset)
     assert all(dataset.read_run(e, images=False).camera is None for e in dataset.entries())
-    default, lidar = (view_arrays(dataset, "val", None, "depth", **kw) for kw in ({}, {"labels": "lidar"}))
+    default, lidar = (view_arrays(dataset, "val", None, "bins", **kw) for kw in ({}, {"labels": "lidar"}))
     assert np.array_equal(default["target"], lidar["target"], equal_nan=True)
     with pytest.raises(ConfigError, match=f"{small_dataset} has no camera labels.*depthq label"):
-        view_arrays(dataset, "train", None, "depth", labels="camera")
-    with pytest.raises(ConfigError, match="Coll-Q-Net learns from the bump"):
+        view_arrays(dataset, "train", None, "bins", labels="camera")
+    with pytest.raises(ConfigError, match="Coll-Q-Net learns only from labels"):
         TrainConfig(model="coll", data=str(small_dataset), labels="camera")
     with pytest.raises(ConfigError, match=r"train\.labels must be one of"):
         TrainConfig(model="depth", data=str(small_dataset), labels="sonar")
@@ -124,8 +124,8 @@ def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, tmp_pa
     from depthq.train.trainer import train
 
     dataset = Dataset.open(labelled)
-    camera = view_arrays(dataset, "train", None, "depth", labels="camera")
-    lidar = view_arrays(dataset, "train", None, "depth")
+    camera = view_arrays(dataset, "train", None, "bins", labels="camera")
+    lidar = view_arrays(dataset, "train", None, "bins")
     assert not np.array_equal(camera["target"], lidar["target"])  # the targets are the camera's
     assert np.array_equal(camera["frame_id"], lidar["frame_id"])  # of the same samples
     out = train(TrainConfig(model="depth", data=str(labelled), labels="camera", **TOY_TRAINING),

@@ -20,7 +20,8 @@ from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
-from depthq.nets.checkpoint import FORMAT_VERSION, load_qnet, read_config
+from depthq.nets.checkpoint import FORMAT_VERSION, read_config
+from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train import trainer

@@ -20,7 +20,7 @@ from depthq.data.run import Run, RunMeta
 from depthq.data.runfile import JPEG_MAX_MEAN_ABS_ERROR, RunReader, read_frame, read_run, write_run
 from depthq.data.stats import dataset_stats
 from depthq.data.subsets import select_runs
-from depthq.data.views import CollView, DepthView, run_then_frame, view_arrays
+from depthq.data.views import FrameView, run_then_frame, view_arrays
 from depthq.errors import ConfigError, DataError
 
 SMALL = (24, 32)  # image size for tests that do not look at JPEG quality
@@ -101,9 +101,9 @@ def test_short_runs_are_left_out(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [21, 19, 20, 25], val_lengths=(19,))
     assert [usable(e, 20) for e in dataset.entries("train")] == [True, False, True, True]
     with pytest.raises(ConfigError, match="no usable val runs"):
-        DepthView(dataset, "val", None, CONFIG)
+        FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
     assert [e.index for e in select_runs(dataset, "train", None, 20)] == [0, 2, 3]
-    arrays = view_arrays(dataset, "train", None, "coll", CONFIG)
+    arrays = view_arrays(dataset, "train", None, "collision", CONFIG)
     assert arrays["run_index"].tolist() == [0, 2, 3]
     assert len(arrays["frame_id"]) == 20 + 19 + 24
 
@@ -224,7 +224,7 @@ def test_loading_a_damaged_file_raises(tmp_path: Path) -> None:
     with pytest.raises(DataError, match=f"{flipped}: corrupted"):
         dataset.reader(entries[1])
     with pytest.raises(DataError, match=str(truncated)):
-        DepthView(dataset, "train", 2, CONFIG)
+        FrameView(dataset, "train", view_arrays(dataset, "train", 2, "bins", CONFIG))
     with pytest.raises(DataError, match=f"{truncated}: not a readable HDF5"):
         read_run(truncated)  # without the manifest's hash, h5py's own error is still a DataError
 
@@ -263,7 +263,7 @@ def test_same_runs_give_the_same_dataset_bytes(tmp_path: Path) -> None:
 def test_views_give_the_right_targets(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [20, 24, 21])  # runs 0, 1 bump, run 2 time limit
     runs = {e.index: dataset.read_run(e) for e in dataset.entries("train")}
-    depth = DepthView(dataset, "train", 3, CONFIG)
+    depth = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "bins", CONFIG))
     assert len(depth) == 14 + 18 + 15  # the original drops the last 5 samples of every run
     for i in range(len(depth)):
         run_id, t = int(depth.arrays["run_id"][i]), int(depth.arrays["frame_id"][i])
@@ -271,18 +271,18 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
         np.testing.assert_array_equal(target, runs[run_id].bins[t + 1])
         assert action == runs[run_id].actions[t]
         np.testing.assert_array_equal(image, runs[run_id].images[t])
-    coll = CollView(dataset, "train", 3, CONFIG)
+    coll = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "collision", CONFIG))
     assert len(coll) == 19 + 23 + 20
     labels = coll.arrays["target"]
     offsets = coll.arrays["run_offsets"]
     assert labels[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
     assert labels[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
-    val = DepthView(dataset, "val", None, CONFIG)
+    val = FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
     assert set(val.arrays["run_id"].tolist()) == {0} and len(val) == 16
     # Collision labels on bumps only: the time-limited run keeps all its samples, labelled 0.
     bumps_only = replace(CONFIG, every_run_end=False)
-    assert len(DepthView(dataset, "train", 3, bumps_only)) == 14 + 18 + 20
-    coll = view_arrays(dataset, "train", 3, "coll", bumps_only)
+    assert len(view_arrays(dataset, "train", 3, "bins", bumps_only)["frame_id"]) == 14 + 18 + 20
+    coll = view_arrays(dataset, "train", 3, "collision", bumps_only)
     assert coll["target"][coll["run_offsets"][2] :].sum() == 0
 
 
@@ -294,20 +294,20 @@ def test_action_labels_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None
     fast = Run(**{**{f: getattr(run, f) for f in ("meta", "images", "scans", "bins", "poses", "times")},
                   "actions": (run.actions * 2.5).astype(np.float32)})
     dataset.add_run(fast, jpeg_quality=90)
-    depth = view_arrays(dataset, "train", None, "depth", CONFIG)
+    depth = view_arrays(dataset, "train", None, "bins", CONFIG)
     np.testing.assert_array_equal(depth["action"], np.clip(fast.actions[:16], -1, 1))
     assert np.abs(fast.actions[:-1]).max() > 1
-    lagged = view_arrays(dataset, "train", None, "depth", replace(CONFIG, action_lag=1))
+    lagged = view_arrays(dataset, "train", None, "bins", replace(CONFIG, action_lag=1))
     np.testing.assert_array_equal(lagged["frame_id"], np.arange(1, 16))
     np.testing.assert_array_equal(lagged["action"], np.clip(fast.actions[:15], -1, 1))
     np.testing.assert_array_equal(lagged["target"], fast.bins[2:17])
-    coll = view_arrays(dataset, "train", None, "coll", replace(CONFIG, action_lag=1))
+    coll = view_arrays(dataset, "train", None, "collision", replace(CONFIG, action_lag=1))
     assert coll["frame_id"][0] == 1 and coll["target"].tolist() == [0] * 15 + [1] * 5
 
 
 def test_views_sample_deterministically(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [20, 30, 22, 21])
-    view = DepthView(dataset, "train", None, CONFIG)
+    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, "bins", CONFIG))
 
     def batches(seed: int, workers: int = 0) -> list[torch.Tensor]:
         loader = DataLoader(view, batch_size=8, sampler=view.sampler(32, seed), num_workers=workers)

@@ -56,7 +56,7 @@ def digests(root: Path) -> dict[str, str]:
         meta = json.dumps(asdict(run.meta), sort_keys=True, default=int)
         runs += [meta, run.scans, run.bins, run.actions, run.poses, run.times]
     labels = [view_arrays(dataset, split, None, kind, DataConfig())[key]
-              for split in ("train", "val") for kind in ("depth", "coll")
+              for split in ("train", "val") for kind in ("bins", "collision")
               for key in ("run_offsets", "frame_id", "action", "target")]
     # Table II's numbers; not the dataset's path, nor its bytes per frame (JPEG: the renderer's pixels)
     stats = dataset_stats(dataset, DataConfig())

@@ -8,11 +8,15 @@ from conftest import assert_video, without_timing
 
 from depthq.cli import main
 from depthq.control import action_selection
-from depthq.control.action_selection import depth_scores, select_coll_action, select_depth_action
+from depthq.control.action_selection import depth_scores
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import distance_from_spawn, imitation_loss, path_length
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.networks import get_network
 from depthq.sim.world import DEFAULT_DECISION_HZ
+
+DEPTH = get_network("depth")
+COLL = get_network("coll")
 
 ACTIONS = np.array(action_selection.ACTIONS)  # the candidates, as the selection rules take them
 
@@ -22,7 +26,7 @@ def test_depth_selection_maximises_the_nearest_predicted_obstacle():
     pred[0, 3] = 0.4  # right turn predicts a close obstacle
     pred[2, 10] = 0.9
     pred[1, 20] = 0.6
-    assert select_depth_action(pred, ACTIONS) == 1.0
+    assert DEPTH.choose(pred, ACTIONS) == 1.0
 
 
 def test_depth_selection_ignores_bins_predicted_as_zero():
@@ -30,15 +34,15 @@ def test_depth_selection_ignores_bins_predicted_as_zero():
     pred[2, :5] = 0.0  # "no prediction", not "wall at 0 m"
     pred[2, 5:] = 1.8
     np.testing.assert_allclose(depth_scores(pred), [1.0, 1.0, 1.8])
-    assert select_depth_action(pred, ACTIONS) == 1.0
+    assert DEPTH.choose(pred, ACTIONS) == 1.0
     assert depth_scores(np.zeros((1, 26)))[0] == 0.0
 
 
 def test_ties_go_straight():
-    assert select_depth_action(np.ones((3, 26)), ACTIONS) == 0.0
-    assert select_coll_action(np.array([0.2, 0.2, 0.2]), ACTIONS) == 0.0
-    assert select_coll_action(np.array([0.1, 0.3, 0.1]), ACTIONS) == -1.0  # straight not among the best
-    assert select_coll_action(np.array([0.3, 0.2, 0.1]), ACTIONS) == 1.0
+    assert DEPTH.choose(np.ones((3, 26)), ACTIONS) == 0.0
+    assert COLL.choose(np.array([0.2, 0.2, 0.2]), ACTIONS) == 0.0
+    assert COLL.choose(np.array([0.1, 0.3, 0.1]), ACTIONS) == -1.0  # straight not among the best
+    assert COLL.choose(np.array([0.3, 0.2, 0.1]), ACTIONS) == 1.0
 
 
 def test_distance_is_the_furthest_straight_line_from_the_spawn():

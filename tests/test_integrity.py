@@ -22,8 +22,9 @@ from depthq.configio import read_json, write_json
 from depthq.data.manifest import MANIFEST, Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.lock import exclusive, lock_path
-from depthq.nets.checkpoint import load_qnet, read_sidecar, weights_bytes
+from depthq.nets.checkpoint import read_sidecar, weights_bytes
 from depthq.nets.trunk import DEFAULT_TRUNK
+from depthq.networks import load_qnet
 from depthq.train.features import ARRAY, cache_dir, load_features
 
 FAST = {"train_batches": 8, "val_batches": 1, "batch_size": 16}

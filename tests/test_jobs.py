@@ -30,8 +30,20 @@ def _span(folder: Path, name: str) -> tuple[float, float, str]:
     return float(start), float(end), cores
 
 
-@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="overlap needs two cores")
-def test_remote_jobs_overlap_one_per_core_after_their_inputs(tmp_path: Path) -> None:
+@pytest.fixture
+def two_cores():
+    """This process on every core of the machine for the test (the suite pins each of its workers to
+    a share of them), restored after."""
+    held = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, range(os.cpu_count() or 1))
+    if len(os.sched_getaffinity(0)) < 2:
+        os.sched_setaffinity(0, held)
+        pytest.skip("overlap needs two cores")
+    yield
+    os.sched_setaffinity(0, held)
+
+
+def test_remote_jobs_overlap_one_per_core_after_their_inputs(tmp_path: Path, two_cores: None) -> None:
     run = partial(_record, tmp_path)
     jobs = [
         Job("prepare", partial(run, "prepare")),  # here, with every core

@@ -17,16 +17,19 @@ import torch
 from paper_head import paper_head
 
 from depthq.cli import main
-from depthq.control.action_selection import TIE_TOL, select_coll_action, select_depth_action
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
 from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
 from depthq.evaluate.online import EvalConfig, drive, evaluate, parse_canyon_set, shares
-from depthq.nets.heads import QNet, build_head
+from depthq.nets.heads import QNet
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
+from depthq.networks import build_head, get_network
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.sim.env import CanyonEnv
+
+DEPTH = get_network("depth")
+COLL = get_network("coll")
 
 CANYONS = ("val:1000", "val:1001", "val:1002")
 LAST_BITS = 2.5e-6  # + 1e-6 relative: what a batch's sums may change (docs/design.md#lockstep)
@@ -99,11 +102,11 @@ def test_a_batched_decision_is_one_frame_decisions() -> None:
 def test_a_tie_within_last_bit_noise_stays_a_tie() -> None:
     actions = np.array([-1.0, 0.0, 1.0])
     for noise in (0.0, 3e-6, -3e-6):  # a few ulps of 2.5 m, as a batch's sums may add
-        assert select_depth_action(np.array([[2.5], [2.5 + noise], [1.0]]), actions) == 0.0
-        assert select_depth_action(np.array([[2.5 + noise], [1.0], [2.5]]), actions) == -1.0
+        assert DEPTH.choose(np.array([[2.5], [2.5 + noise], [1.0]]), actions) == 0.0
+        assert DEPTH.choose(np.array([[2.5 + noise], [1.0], [2.5]]), actions) == -1.0
     for noise in (0.0, 4e-7, -4e-7):  # a probability's last bits, at most a quarter of its logit's
-        assert select_coll_action(np.array([0.2, 0.9, 0.2 + noise]), actions) == -1.0
-    assert select_depth_action(np.array([[2.5], [2.5 - 2 * TIE_TOL['depth']], [1.0]]), actions) == -1.0
+        assert COLL.choose(np.array([0.2, 0.9, 0.2 + noise]), actions) == -1.0
+    assert DEPTH.choose(np.array([[2.5], [2.5 - 2 * DEPTH.tie_tol], [1.0]]), actions) == -1.0
 
 
 def test_which_policies_decide_in_batches() -> None:

@@ -21,22 +21,22 @@ from torch import nn
 
 from depthq.control.action_selection import (
     ACTIONS,
-    TIE_TOL,
     Selection,
     candidate_sequences,
     depth_scores,
     pick_best,
-    select_action,
     sequence_scores,
 )
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
-from depthq.data.views import DepthView, view_arrays
+from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.nets.heads import build_head
 from depthq.nets.losses import depth_l1_loss, lookahead_l1_loss
+from depthq.networks import build_head, get_network
 from depthq.train.config import TrainConfig
+
+DEPTH = get_network("depth")
 
 CONFIG = DataConfig()
 
@@ -50,8 +50,8 @@ def _stored(dataset: Dataset, split: str, index: int) -> tuple[np.ndarray, np.nd
 @pytest.mark.parametrize("changes", [{}, {"every_run_end": False}, {"action_lag": 1}])
 def test_targets_over_the_lookahead_are_the_stored_bins_shifted(small_dataset: Path, changes: dict) -> None:
     dataset, config, k = Dataset.open(small_dataset), replace(CONFIG, **changes), 3
-    one = view_arrays(dataset, "train", None, "depth", config)
-    ahead = view_arrays(dataset, "train", None, "depth", config, lookahead=k)
+    one = view_arrays(dataset, "train", None, "bins", config)
+    ahead = view_arrays(dataset, "train", None, "bins", config, lookahead=k)
     # The same samples as the one-step view, whose targets and actions are step 1's.
     for key in ("run_index", "run_offsets", "run_id", "frame_id"):
         np.testing.assert_array_equal(ahead[key], one[key])
@@ -85,10 +85,11 @@ def test_targets_over_the_lookahead_are_the_stored_bins_shifted(small_dataset: P
 def test_a_view_refuses_a_bad_lookahead_by_value(small_dataset: Path) -> None:
     dataset = Dataset.open(small_dataset)
     with pytest.raises(ConfigError, match="lookahead must be an integer >= 1, got 0"):
-        view_arrays(dataset, "train", None, "depth", CONFIG, lookahead=0)
+        view_arrays(dataset, "train", None, "bins", CONFIG, lookahead=0)
     with pytest.raises(ConfigError, match="its lookahead must be 1, got 3"):
-        view_arrays(dataset, "train", None, "coll", CONFIG, lookahead=3)
-    image, actions, targets = DepthView(dataset, "val", None, CONFIG, lookahead=2)[0]
+        view_arrays(dataset, "train", None, "collision", CONFIG, lookahead=3)
+    arrays = view_arrays(dataset, "val", None, "bins", CONFIG, lookahead=2)
+    image, actions, targets = FrameView(dataset, "val", arrays)[0]
     assert image.dtype == np.uint8 and actions.shape == (2,) and targets.shape == (2, 26)
 
 
@@ -132,7 +133,7 @@ def test_a_lookahead_head_takes_sequences_and_gives_every_step() -> None:
     with pytest.raises(ConfigError, match=r"expected action sequences \(B, 3\), got \(4,\)"):
         head(torch.randn(4, 64), torch.zeros(4))
     with pytest.raises(ConfigError, match="its lookahead must be 1, got 2"):
-        paper_head("coll", 64, lookahead=2)
+        build_head(paper_head("coll", 64, lookahead=2))
     with pytest.raises(ConfigError, match="lookahead must be a positive integer, got 0"):
         paper_head("depth", 64, lookahead=0)
 
@@ -172,11 +173,11 @@ def test_selection_at_lookahead_one_picks_what_the_one_step_rule_picks() -> None
         if trial % 3 == 0:  # ties and ReLU zeros, where the tie rule decides
             pred[rng.integers(3)] = pred[rng.integers(3)]
             pred[:, rng.integers(26)] = 0.0
-        today = pick_best(depth_scores(pred), np.asarray(ACTIONS), True, TIE_TOL["depth"])
-        assert select_action("depth", pred, np.asarray(ACTIONS)) == today
+        today = pick_best(depth_scores(pred), np.asarray(ACTIONS), True, DEPTH.tie_tol)
+        assert DEPTH.choose(pred, np.asarray(ACTIONS)) == today
         for selection in (Selection(rule="farthest_nearest_bin"), Selection(switch=True)):
             sequences = candidate_sequences(ACTIONS, 1, selection.switch)
-            assert select_action("depth", pred[:, None], sequences, selection) == today
+            assert DEPTH.choose(pred[:, None], sequences, selection) == today
 
 
 def test_selection_over_sequences_min_or_discounted_first_action() -> None:
@@ -190,14 +191,14 @@ def test_selection_over_sequences_min_or_discounted_first_action() -> None:
     pred[2, :, 5] = 0.9  # left stays 0.9 m from something
     minimum = Selection(rule="farthest_nearest_bin")
     np.testing.assert_allclose(sequence_scores(pred, minimum), [0.2, 0.4, 0.9])
-    assert select_action("depth", pred, held, minimum) == 1.0  # the farthest minimum over the steps: left
-    assert select_action("depth", pred[:, :1], held[:, :1], minimum) == 0.0  # one step ahead: straight
+    assert DEPTH.choose(pred, held, minimum) == 1.0  # the farthest minimum over the steps: left
+    assert DEPTH.choose(pred[:, :1], held[:, :1], minimum) == 0.0  # one step ahead: straight
     assert Selection().rule == "discounted_nearest_bin"  # the default, chosen on val canyons
     discounted = Selection(rule="discounted_nearest_bin", discount=0.5)
     w = np.array([1, 0.5, 0.25])
     np.testing.assert_allclose(sequence_scores(pred, discounted), [(0.2 + 0.75 + 0.375) / w.sum(),
                                                                    (1.5 + 0.75 + 0.1) / w.sum(), 0.9])
-    assert select_action("depth", pred, held, discounted) == 0.0  # straight: the wall is far off
+    assert DEPTH.choose(pred, held, discounted) == 0.0  # straight: the wall is far off
     with pytest.raises(ConfigError, match="got 'nearest'"):
         Selection(rule="nearest")
     with pytest.raises(ConfigError, match=r"discount must be in \(0, 1\], got 1\.5"):
@@ -245,7 +246,7 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 @pytest.mark.slow
 def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: Path, tmp_path: Path) -> None:
     from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-    from depthq.nets.checkpoint import load_qnet
+    from depthq.networks import load_qnet
     from depthq.policies.qnet import QNetPolicy
     from depthq.policies.registry import make_policy
     from depthq.train.trainer import train

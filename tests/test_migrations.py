@@ -20,7 +20,8 @@ from depthq.nets.checkpoint import (
     policy_record,
     read_config,
 )
-from depthq.nets.heads import HeadConfig, build_head
+from depthq.nets.heads import HeadConfig
+from depthq.networks import build_head
 from depthq.train.config import TrainConfig
 
 STORED = Path(__file__).parent / "data"

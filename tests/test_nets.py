@@ -17,11 +17,12 @@ from torch import nn
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
 from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
-from depthq.nets.heads import CollHead, DepthHead, QNet, build_head, probability
+from depthq.nets.heads import CollHead, DepthHead, QNet, probability
 from depthq.nets.losses import coll_bce_loss, depth_l1_loss
 from depthq.nets.mobilenet_v1 import MobileNetV1
 from depthq.nets.optim import EPS, RHO, make_optimizer
 from depthq.nets.trunk import COLUMNS, DEFAULT_TRUNK, TRUNKS, build_trunk, preprocess
+from depthq.networks import build_head
 
 CAT_CLASSES = range(281, 286)  # tabby, tiger cat, Persian, Siamese, Egyptian cat
 ESPRESSO = 967
@@ -172,10 +173,10 @@ def test_heads_shapes_init_and_config():
     assert depth(features, actions).shape == (5, 26) and (depth(features, actions) >= 0).all()
     assert coll(features, actions.reshape(-1, 1)).shape == (5,)
     assert all(torch.all(m.bias == 0) for m in coll.modules() if isinstance(m, nn.Linear))
-    for bad, match in (({"kind": "value"}, "kind"), ({"hidden": 0}, "hidden"), ({"dropout": 1.0}, "dropout"),
-                       ({"action_scale": 0.0}, "action_scale")):
+    for bad, match in (({"kind": "value"}, "unknown network 'value'"), ({"hidden": 0}, "hidden"),
+                       ({"dropout": 1.0}, "dropout"), ({"action_scale": 0.0}, "action_scale")):
         with pytest.raises(ConfigError, match=match):
-            paper_head(**{"kind": "depth", "feature_dim": 256, **bad})
+            build_head(paper_head(**{"kind": "depth", "feature_dim": 256, **bad}))
     # action_scale s feeds s·a to the hidden layer: the same weights see action a as the plain head sees s·a
     scaled = build_head(paper_head("depth", 256, action_scale=10.0))
     scaled.load_state_dict(depth.state_dict())
@@ -283,7 +284,7 @@ def test_a_per_action_head_predicts_each_anchor_and_blends_between():
     torch.testing.assert_close(out[4], anchors[2])  # beyond the anchors: clipped to the last
     for bad in ({"kind": "coll"}, {"lookahead": 2}, {"form": "dueling"}):
         with pytest.raises(ConfigError, match="form"):
-            paper_head(**{"kind": "depth", "feature_dim": 32, "form": "per_action", **bad})
+            build_head(paper_head(**{"kind": "depth", "feature_dim": 32, "form": "per_action", **bad}))
 
 
 def test_the_grid_feature_keeps_rows_and_columns_of_the_block_map():
@@ -310,7 +311,7 @@ def test_a_depth_first_head_perceives_the_current_bins_then_advances_them():
         moved = head.advance(torch.ones(2, 26), torch.tensor([-1.0, 1.0]))
         assert (moved >= 0).all() and not torch.equal(moved[0], moved[1])  # the action matters
     with pytest.raises(ConfigError, match="depth_first"):
-        paper_head("coll", 32, form="depth_first")
+        build_head(paper_head("coll", 32, form="depth_first"))
 
 
 @pytest.mark.parametrize("form", ["concat", "depth_first"])
@@ -328,4 +329,4 @@ def test_an_output_bias_starts_every_depth_bin_alive(form):
     for bad, match in (({"output_bias": -0.5}, "output_bias"), ({"output_bias": math.inf}, "output_bias"),
                        ({"kind": "coll", "output_bias": 1.0}, "Depth-Q-Net")):
         with pytest.raises(ConfigError, match=match):
-            paper_head(**{"kind": "depth", "feature_dim": 256, **bad})
+            build_head(paper_head(**{"kind": "depth", "feature_dim": 256, **bad}))

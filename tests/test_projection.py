@@ -21,12 +21,11 @@ from test_lookahead import _one_step_head_by_hand
 from depthq.cli import main
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
-from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.nets.checkpoint import load_qnet
-from depthq.nets.heads import QNet, build_head, pca_projection
+from depthq.nets.heads import QNet, pca_projection
 from depthq.nets.optim import make_optimizer
+from depthq.networks import build_head, get_network, load_qnet
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
@@ -144,7 +143,7 @@ def _config_of(folder: Path) -> TrainConfig:
 def _training_features(config: TrainConfig) -> np.ndarray:
     """The cached features of `config`'s training samples, as the trainer gathers them."""
     dataset = Dataset.open(Path(config.data))
-    arrays = view_arrays(dataset, "train", config.runs, config.model, config.samples, config.lookahead)
+    arrays = get_network(config.model).samples(dataset, "train", config.runs, config)
     table = load_features(dataset, config.trunk, config.input_size, progress=False)
     return table.gather("train", arrays).numpy()
 

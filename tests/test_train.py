@@ -18,12 +18,12 @@ from depthq.configio import read_json
 from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env
-from depthq.data.views import DepthView
+from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args
-from depthq.nets.checkpoint import load_qnet
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.scripts.train import add_arguments
 from depthq.train.config import TrainConfig
@@ -183,7 +183,8 @@ def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path, trunk: s
 @pytest.mark.slow
 def test_image_samples_are_the_preprocessed_frames(data: Path) -> None:
     """Frames are decoded once and held as uint8; a batch must equal preprocessing its frames."""
-    view = DepthView(Dataset.open(data), "train")
+    dataset = Dataset.open(data)
+    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, "bins"))
     samples = ImageSamples(view, 64)
     idx = torch.tensor([0, len(view) - 1, 7, 7])
     batch = samples.batch(idx)

@@ -12,6 +12,8 @@ source against it, folders and files):
                                             action selection rules (collection drives them)
     ← data                                  collection and the on-disk datasets, ROS 2 bags
     ← nets                                  trunks, heads, losses, optimizer, checkpoints read back
+    ← networks                              Depth-Q-Net, Coll-Q-Net and any network registered by name:
+                                            what differs between networks, asked by every layer above
     ← policies                              the learned policies (torch or onnxruntime) and
                                             `make_policy`, which builds any policy from its spec
     ← train                                 the trainer, its checkpoints, and the offline metric that

@@ -35,6 +35,9 @@ from depthq.errors import ConfigError
 
 T = TypeVar("T")
 
+# A field's metadata key for its choices, when no Literal can list them: a function giving them when
+# the parser is built (e.g. the registered networks' names, `TrainConfig.model`).
+CHOICES = "choices"
 _NONE = ("none", "null")
 _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 _SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=[A-Z`])")
@@ -50,6 +53,7 @@ class Flag:
     hint: Any
     default: Any  # dataclasses.MISSING: a required flag
     help: str  # from the class (`field_help`); empty when it has none
+    choices: tuple[str, ...] | None = None  # a str field's choices (`CHOICES`); None: any value
 
     @property
     def name(self) -> str:
@@ -78,7 +82,8 @@ def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]
             out += config_flags(hint, None if value is dataclasses.MISSING else value, f"{prefix}{f.name}.")
             continue
         _check_type(hint, f"{cls.__name__}.{f.name}")
-        out.append(Flag(prefix + f.name, cls, hint, value, docs.get(f.name, "")))
+        choices = tuple(f.metadata[CHOICES]()) if CHOICES in f.metadata else None
+        out.append(Flag(prefix + f.name, cls, hint, value, docs.get(f.name, ""), choices))
     return out
 
 
@@ -122,6 +127,8 @@ def add_config_arguments(
         else:
             kwargs["type"] = _argparse_type(flag.hint)
             kwargs["metavar"] = _metavar(flag.hint, flag.path.rpartition(".")[2])
+            if flag.choices is not None:
+                kwargs["choices"], kwargs["metavar"] = flag.choices, "{" + ",".join(flag.choices) + "}"
         names = (flag.name, *aliases.get(flag.path, ()))
         groups[where].add_argument(*names, required=flag.default is dataclasses.MISSING,
                                    help=text.replace("%", "%%"), **kwargs)

@@ -11,8 +11,9 @@ import torch
 from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import QNet, build_head
+from depthq.nets.heads import QNet
 from depthq.nets.trunk import build_trunk
+from depthq.networks import build_head
 from depthq.parallel import cores
 from depthq.policies.qnet import QNetPolicy
 from depthq.policies.registry import make_policy

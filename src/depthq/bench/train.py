@@ -9,10 +9,11 @@ import numpy as np
 import torch
 
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import QNet, build_head
+from depthq.nets.heads import QNet
 from depthq.nets.losses import depth_l1_loss
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import build_trunk
+from depthq.networks import build_head
 from depthq.parallel import cores
 from depthq.train.config import TrainConfig, check_precisions
 from depthq.train.features import FeatureTable

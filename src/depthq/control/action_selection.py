@@ -1,9 +1,11 @@
 """Turning Q-net predictions into an action (docs/design.md#action-selection), as pure functions.
 
-Depth-Q-Net: for each candidate action, the minimum predicted bin (bins predicted as exactly 0 are
-ignored: a ReLU output of 0 means "no prediction"); take the action whose closest obstacle is
-farthest. Coll-Q-Net: the action with the lowest collision probability. Ties (within TIE_TOL) go
-straight when straight is among the best, otherwise to the first tied candidate.
+The rules by name (`RULES`); which one a network acts by, and its tie tolerance, are the network's
+(`depthq.networks`). Farthest nearest bin (Depth-Q-Net's): for each candidate action, the minimum
+predicted bin (bins predicted as exactly 0 are ignored: a ReLU output of 0 means "no prediction");
+take the action whose closest obstacle is farthest. Lowest collision probability (Coll-Q-Net's): the
+action with the lowest. Ties (within the caller's tolerance, `pick_best`) go straight when straight is
+among the best, otherwise to the first tied candidate.
 
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead-selection) scores candidate action
 sequences (N, K), all in one head pass: each action held for K steps, and with `Selection.switch`
@@ -23,8 +25,7 @@ import numpy as np
 from depthq.errors import ConfigError
 
 ACTIONS = (-1.0, 0.0, 1.0)  # the candidate actions a Q-net policy scores per frame
-# Each kind's rule by name, as a checkpoint records it, and in words, as an exported graph carries it.
-RULE_OF = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_probability"}
+# The rules by name, as a checkpoint records them, and in words, as an exported graph carries them.
 RULES = {
     "farthest_nearest_bin": "for each candidate (an action, or a sequence of a lookahead Depth-Q-Net) "
     "the nearest predicted bin (bins of exactly 0 ignored), its minimum over the predicted steps; the "
@@ -37,11 +38,6 @@ RULES = {
     "if straight is tied, else to the first",
 }
 DEPTH_RULES = ("farthest_nearest_bin", "discounted_nearest_bin")
-# Scores within TIE_TOL[kind] of the best are tied: above the last-bit noise a batch's sums add
-# (docs/design.md#lockstep), so a tie stays one whichever kernel computed the scores. Depth-Q-Net's
-# metres below 10 carry up to ~5e-6 of it, hence 1e-5; Coll-Q-Net's probabilities at most ~4e-7 (a
-# sigmoid's slope is ≤ 1/4), so its tolerance stays the 1e-6 its published results were driven with.
-TIE_TOL = {"depth": 1e-5, "coll": 1e-6}
 
 
 @dataclass(frozen=True)
@@ -109,30 +105,11 @@ def first_actions(candidates: np.ndarray) -> np.ndarray:
 
 
 def pick_best(scores: np.ndarray, actions: np.ndarray, maximise: bool, tol: float) -> float:
-    """The best-scoring action; ties (within `tol`) go to 0 if it is tied, else to the first tied."""
+    """The best-scoring action; ties (within `tol`: above the last-bit noise a batch's sums add,
+    docs/design.md#lockstep) go to 0 if it is tied, else to the first tied."""
     scores = np.asarray(scores, dtype=np.float64)
     best = scores.max() if maximise else scores.min()
     tied = np.flatnonzero(np.abs(scores - best) <= tol)
     straight = [k for k in tied if actions[k] == 0]
     return float(actions[straight[0] if straight else tied[0]])
 
-
-def select_depth_action(
-    pred_bins: np.ndarray, actions: np.ndarray, selection: Selection | None = None
-) -> float:
-    """Candidates `actions` (N,) with bins (N, n_bins), or sequences (N, K) with bins (N, K, n_bins)."""
-    return pick_best(sequence_scores(pred_bins, selection), first_actions(actions), True, TIE_TOL["depth"])
-
-
-def select_coll_action(collision_prob: np.ndarray, actions: np.ndarray) -> float:
-    return pick_best(np.asarray(collision_prob), first_actions(actions), False, TIE_TOL["coll"])
-
-
-def select_action(
-    kind: str, values: np.ndarray, actions: np.ndarray, selection: Selection | None = None
-) -> float:
-    """The rule of a Q-net of `kind`: 'depth' (predicted bins per candidate, `selection`'s rule) or
-    'coll' (probabilities)."""
-    if kind == "depth":
-        return select_depth_action(values, actions, selection)
-    return select_coll_action(values, actions)

@@ -6,13 +6,13 @@ A subclass only predicts: `values(image)` for one frame.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from depthq.configio import to_dict
-from depthq.control.action_selection import Selection, candidate_sequences, select_action
+from depthq.control.action_selection import Selection, candidate_sequences
 from depthq.control.policy import Observation
 
 
@@ -22,9 +22,13 @@ class GreedyPolicy:
     net's first step of each action held) or (N,) collision probabilities."""
 
     def _set_candidates(
-        self, kind: str, actions: Sequence[float] | np.ndarray, lookahead: int, selection: Selection | None
+        self, kind: str, rule: Callable[[np.ndarray, np.ndarray, Selection], float],
+        actions: Sequence[float] | np.ndarray, lookahead: int, selection: Selection | None,
     ) -> None:
+        """`kind`: the network's name; `rule`: (values, candidates, selection) → the action (its
+        network's `choose`)."""
         self.kind = kind
+        self._rule = rule
         self.actions = np.asarray(actions, np.float64)
         self.lookahead = lookahead
         self.selection = selection or Selection()
@@ -43,7 +47,7 @@ class GreedyPolicy:
 
     def choose(self, values: np.ndarray) -> float:
         """The action one frame's `values` select (every path that acts calls this)."""
-        return select_action(self.kind, values, self.candidates, self.selection)
+        return self._rule(values, self.candidates, self.selection)
 
     def shown(self, values: np.ndarray) -> np.ndarray:
         """What `last_values` keeps of one frame's `values`: per action, its prediction at t+1."""

@@ -32,7 +32,9 @@ from depthq.errors import ConfigError
 
 HORIZON = 5
 MIN_FRAMES = 20
-KINDS = ("depth", "coll")  # Depth-Q-Net's samples and Coll-Q-Net's
+# A sample's target: the next frames' depth bins ("bins", Depth-Q-Net's), or whether a collision
+# follows within `horizon` frames ("collision", Coll-Q-Net's).
+TARGETS = ("bins", "collision")
 
 
 @dataclass(frozen=True)
@@ -69,16 +71,16 @@ class SampleConfig:
             raise ConfigError(f"action_lag must be 0 or 1, got {self.action_lag!r}")
 
 
-def check_lookahead(kind: str, lookahead: object, what: str = "lookahead") -> None:
-    """A `kind` network's lookahead (docs/design.md#lookahead), the one place its rule is: an integer
-    >= 1, and 1 for Coll-Q-Net, which looks ahead through its label's `horizon` (else a ConfigError
-    naming `what`)."""
-    if kind not in KINDS:
-        raise ConfigError(f"network kind must be one of {KINDS}, got {kind!r}")
+def check_lookahead(target: str, lookahead: object, what: str = "lookahead") -> None:
+    """The lookahead of samples of `target` (docs/design.md#lookahead): an integer >= 1, and 1 for a
+    collision target, which looks ahead through its label's `horizon` (else a ConfigError naming
+    `what`)."""
+    if target not in TARGETS:
+        raise ConfigError(f"a sample's target must be one of {TARGETS}, got {target!r}")
     if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
         raise ConfigError(f"{what} must be an integer >= 1, got {lookahead!r}")
-    if kind == "coll" and lookahead != 1:
-        raise ConfigError(f"{what} is Depth-Q-Net's; Coll-Q-Net looks ahead through its label (horizon), "
+    if target == "collision" and lookahead != 1:
+        raise ConfigError(f"{what}: a collision target looks ahead through its label (horizon), "
                           f"so its lookahead must be 1, got {lookahead!r}")
 
 

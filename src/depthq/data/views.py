@@ -1,18 +1,19 @@
-"""The two training views of a dataset: samples as arrays (for cached features) and as PyTorch datasets.
+"""The training views of a dataset: samples as arrays (for cached features) and as a PyTorch dataset.
 
-A view is the sample list of one split (or nested subset) for one network:
+A view is the sample list of one split (or nested subset) for one kind of target
+(`depthq.data.labels.TARGETS`; a network picks its view: `depthq.networks`):
 
-    kind "depth"  (image_t, a_t, bins[t + 1])   Depth-Q-Net; collision runs lose their last H samples
-    kind "coll"   (image_t, a_t, y_t)           Coll-Q-Net; every frame with an action
+    target "bins"       (image_t, a_t, bins[t + 1])   Depth-Q-Net's; collision runs lose their last H samples
+    target "collision"  (image_t, a_t, y_t)           Coll-Q-Net's; every frame with an action
 
-A Depth-Q-Net view's bins (its targets and the frame's own `current` bins) are the LiDAR's, or with
+A bins view's bins (its targets and the frame's own `current` bins) are the LiDAR's, or with
 `labels="camera"` those a labeller estimated from the camera (`depthq.data.camera_labels`).
-A Depth-Q-Net view with `lookahead` K > 1 has the same samples, each with K actions and K targets
+A bins view with `lookahead` K > 1 has the same samples, each with K actions and K targets
 (a_t … a_{t+K−1}, bins[t + 1] … bins[t + K]) and a mask of the valid steps (`depthq.data.labels`).
 
 `view_arrays` gives everything but the images as NumPy arrays, samples ordered by run then frame,
 with `run_offsets` so that "a random run, then a random frame of it" (docs/design.md#sampling) can be drawn on
-precomputed trunk features as well (`run_then_frame`). `DepthView`/`CollView` add the images,
+precomputed trunk features as well (`run_then_frame`). `FrameView` adds the images,
 decoded on demand from run files opened lazily (a bounded number per process, reopened after a
 fork), so a 900-run dataset never sits in memory. Draw their batches with `view.sampler(...)`.
 """
@@ -50,24 +51,25 @@ def view_arrays(
     dataset: Dataset,
     split: str,
     n_runs: int | None,
-    kind: str,
+    target: str,
     config: SampleConfig | None = None,
     lookahead: int = 1,
     labels: str = "lidar",
 ) -> dict[str, np.ndarray]:
-    """All samples of a view, run by run; a Depth-Q-Net's bins from `labels` (the LiDAR or the camera).
+    """All samples of a view of `target`, run by run; a bins view's bins from `labels` (the LiDAR or the
+    camera).
 
     Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
     `frame_id` (t), `action` (a_t: the stored command of frame t − action_lag, clipped to
-    ±action_clip), `current`: bins[t] (S, 26), and `target`: bins[t + 1] (S, 26) for "depth", y_t
-    (S,) for "coll".
+    ±action_clip), `current`: bins[t] (S, 26), and `target`: bins[t + 1] (S, 26) for "bins", y_t
+    (S,) for "collision".
 
-    "depth" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
+    "bins" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
     clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
     step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.labels`).
     """
-    check_lookahead(kind, lookahead, "view lookahead")
+    check_lookahead(target, lookahead, "view lookahead")
     if labels not in LABEL_SOURCES:
         raise ConfigError(f"view labels must be one of {LABEL_SOURCES}, got {labels!r}")
     config = config or SampleConfig()
@@ -77,26 +79,26 @@ def view_arrays(
     frame_ids, actions, targets, masks, current = [], [], [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
-        bins = _depth_bins(dataset, run, labels) if kind == "depth" else run.bins
+        bins = run.bins if target == "collision" else _depth_bins(dataset, run, labels)
         ended = labelled_collision(entry, config.every_run_end)
-        if kind == "depth" and lookahead > 1:
+        if target == "collision":
+            t = coll_sample_indices(run.n_frames, config.action_lag)
+            y = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
+            commands = run.actions[t - config.action_lag]
+        elif lookahead > 1:
             t, frames, mask = depth_lookahead_frames(
                 run.n_frames, ended, lookahead, config.horizon, config.action_lag
             )
-            target = np.where(mask[:, :, None], bins[frames], np.float32(np.nan))
+            y = np.where(mask[:, :, None], bins[frames], np.float32(np.nan))
             commands = run.actions[lookahead_action_indices(t, run.n_frames, lookahead, config.action_lag)]
             masks.append(mask)
-        elif kind == "depth":
-            t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
-            target, commands = bins[t + 1], run.actions[t - config.action_lag]
         else:
-            t = coll_sample_indices(run.n_frames, config.action_lag)
-            target = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
-            commands = run.actions[t - config.action_lag]
+            t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
+            y, commands = bins[t + 1], run.actions[t - config.action_lag]
         frame_ids.append(t)
         current.append(bins[t])
         actions.append(np.clip(commands, -config.action_clip, config.action_clip))
-        targets.append(target)
+        targets.append(y)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
     run_index = np.array([entry.index for entry in runs], dtype=np.int64)
     return {
@@ -148,23 +150,14 @@ class RunThenFrameSampler(Sampler[int]):
 
 
 class FrameView(TorchDataset):
-    """Map-style dataset of one view: item i is (image uint8 (H, W, 3), action, target), float32
-    (a Depth-Q-Net's with `lookahead` K > 1: actions (K,), targets (K, 26))."""
-
-    kind: str
+    """Map-style dataset of a view's samples (`view_arrays` of `split`): item i is (image uint8
+    (H, W, 3), action, target), float32 (a lookahead view's: actions (K,), targets (K, 26))."""
 
     def __init__(
-        self,
-        dataset: Dataset,
-        split: str,
-        n_runs: int | None = None,
-        config: SampleConfig | None = None,
-        max_open_files: int = 64,
-        lookahead: int = 1,
-        labels: str = "lidar",
+        self, dataset: Dataset, split: str, arrays: dict[str, np.ndarray], max_open_files: int = 64
     ) -> None:
         self.dataset = dataset
-        self.arrays = view_arrays(dataset, split, n_runs, self.kind, config, lookahead, labels)
+        self.arrays = arrays
         self._entries: dict[int, RunEntry] = {entry.index: entry for entry in dataset.entries(split)}
         self._max_open = max_open_files
         self._readers: OrderedDict[int, RunReader] = OrderedDict()
@@ -199,15 +192,3 @@ class FrameView(TorchDataset):
         state["_readers"] = OrderedDict()  # open files do not travel to worker processes
         return state
 
-
-class DepthView(FrameView):
-    """Depth-Q-Net's samples: target = the next frame's 26 depth bins (NaN = invalid bin), the LiDAR's or
-    the camera's (`labels`)."""
-
-    kind = "depth"
-
-
-class CollView(FrameView):
-    """Coll-Q-Net's samples: target = 1.0 if a collision follows within H frames, else 0.0."""
-
-    kind = "coll"

@@ -1,8 +1,10 @@
 """`depthq export`: a trained Q-net as one ONNX graph, camera frame in, per-action values out.
 
 The graph takes a uint8 camera frame (H, W, 3) of the size it was exported for (by default the
-checkpoint's: its training data's frames) and the N candidate actions (N,) float32; it returns the predicted
-depth bins (N, n_bins) in metres (Depth-Q-Net) or the collision probabilities (N,) (Coll-Q-Net). A
+checkpoint's: its training data's frames) and the N candidate actions (N,) float32; it returns the
+network's values (`Network.output`, named `Network.onnx_output`): the predicted depth bins (N, n_bins)
+in metres ("bins", Depth-Q-Net) or the collision probabilities (N,) ("collision_probability",
+Coll-Q-Net). A
 Depth-Q-Net that looks K steps ahead takes candidate sequences (N, K) and returns (N, K, n_bins).
 Resizing and scaling to [0, 1] are inside the graph, so a robot needs nothing but onnxruntime and
 numpy. The resize is `depthq.nets.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
@@ -13,10 +15,10 @@ of the pixels, which moved the predicted bins by up to 0.18 m.)
 
 The model's metadata (`metadata_props`) carries what acting needs:
 
-    depthq.kind        "depth" or "coll"
+    depthq.kind        the network's name (`depthq.networks`): "depth" or "coll"
     depthq.actions     the candidate actions, JSON, e.g. [-1.0, 0.0, 1.0]
     depthq.lookahead   K, the steps a Depth-Q-Net predicts (1: one step; Coll-Q-Net: 1)
-    depthq.selection   the rule that turns the outputs into one action (`depthq.control.action_selection`)
+    depthq.selection   the rule that turns the outputs into one action, in words (`Network.rule_text`)
     depthq.input_size  the side the frame is resized to
     depthq.frame_size  the frame the graph takes, JSON [height, width]
     depthq.config      the checkpoint's config.json, verbatim
@@ -34,11 +36,12 @@ from torch import nn
 
 from depthq import __version__
 from depthq.configio import atomic_write_bytes
-from depthq.control.action_selection import RULES, candidate_sequences
+from depthq.control.action_selection import candidate_sequences
 from depthq.deploy.resize import resize_weights
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import load_qnet, policy_record
+from depthq.nets.checkpoint import policy_record
 from depthq.nets.heads import QNet
+from depthq.networks import Network, get_network, load_qnet
 
 OPSET = 18
 
@@ -69,17 +72,16 @@ class FramePolicyGraph(nn.Module):
     """What the ONNX graph computes: (frame uint8 (H, W, 3), actions (N,) or sequences (N, K)) →
     per-candidate values."""
 
-    def __init__(self, net: QNet, kind: str, input_size: int, frame_size: tuple[int, int]) -> None:
+    def __init__(self, net: QNet, network: Network, input_size: int, frame_size: tuple[int, int]) -> None:
         super().__init__()
         self.resize = FrameResize(frame_size, input_size)
         self.trunk = net.trunk.net  # the bare network: no micro-batching or layout tricks to trace
         self.head = net.head
-        self.kind = kind
+        self.network = network
 
     def forward(self, frame: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         feature = self.trunk.features(self.resize(frame))
-        out = self.head(feature.expand(actions.shape[0], -1), actions)
-        return torch.sigmoid(out) if self.kind == "coll" else out
+        return self.network.output(self.head(feature.expand(actions.shape[0], -1), actions))
 
 
 def export_onnx(
@@ -101,7 +103,7 @@ def export_onnx(
 
     checkpoint, out = Path(checkpoint), Path(out)
     net, record = load_qnet(checkpoint, weights=weights)  # checks the weights' SHA-256
-    kind = record["head"]["kind"]
+    network = get_network(record["head"]["kind"])
     input_size = int(record["input_size"])
     policy = policy_record(record)
     frame_size = tuple(policy.frame_size if frame_size is None else frame_size)
@@ -110,7 +112,7 @@ def export_onnx(
         raise ConfigError(f"frame size must be (height, width), each ≥ {input_size}, got {frame_size}")
     if not actions or any(not -1 <= a <= 1 for a in actions):
         raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
-    graph = FramePolicyGraph(net, kind, input_size, frame_size).eval()
+    graph = FramePolicyGraph(net, network, input_size, frame_size).eval()
     frame = torch.zeros(*frame_size, 3, dtype=torch.uint8)
     lookahead = net.head.config.lookahead
     held = candidate_sequences(actions, lookahead)  # an example input: any N candidates run
@@ -120,7 +122,7 @@ def export_onnx(
             graph,
             (frame, candidates),
             input_names=["frame", "actions"],
-            output_names=["bins" if kind == "depth" else "collision_probability"],
+            output_names=[network.onnx_output],
             dynamic_shapes={"frame": {}, "actions": {0: torch.export.Dim("k", min=1)}},
             opset_version=OPSET,
             dynamo=True,
@@ -130,10 +132,10 @@ def export_onnx(
         program.save(Path(tmp) / "model.onnx")
         model = onnx.load(Path(tmp) / "model.onnx")
     metadata = {
-        "depthq.kind": kind,
+        "depthq.kind": network.name,
         "depthq.actions": json.dumps([float(a) for a in actions]),
         "depthq.lookahead": str(lookahead),
-        "depthq.selection": RULES[policy.rule],
+        "depthq.selection": network.rule_text,
         "depthq.input_size": str(input_size),
         "depthq.frame_size": json.dumps(list(frame_size)),
         "depthq.config": json.dumps(record, sort_keys=True),

@@ -11,11 +11,20 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from depthq.networks import ValuePlot, get_network, network_names
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.sensors import BinConfig
 from depthq.sim.topdown import draw_run, plot_runs
 
 ACTION_NAMES = {-1.0: "right (−1)", 0.0: "straight (0)", 1.0: "left (+1)"}
+# A policy that is no network's (the heuristic, OU): the true depth alone, drawn as a network's bins.
+DEPTH_PLOT = ValuePlot("bins", "depth (m)", (0.0, 2.2))
+
+
+def value_plot(policy: dict[str, Any]) -> ValuePlot:
+    """How the values of the policy `policy` describes are drawn: its network's way (`Network.plot`)."""
+    kind = policy.get("kind")
+    return get_network(kind).plot if kind in network_names() else DEPTH_PLOT
 
 
 def plot_trajectories(runs: list[dict[str, Any]], path: Path, title: str) -> None:
@@ -39,7 +48,7 @@ def bin_bearings(config: BinConfig | None = None) -> np.ndarray:
 def plot_fig4(snaps: list[dict[str, Any]], run: dict[str, Any], policy: dict[str, Any], path: Path) -> None:
     """Per snapshot: the camera frame, the per-action predictions beside the true future depth,
     and the robot's place in the canyon (as Fig. 4 of the paper)."""
-    kind = policy.get("kind", "depth")
+    plot = value_plot(policy)
     actions = policy.get("actions", [-1.0, 0.0, 1.0])
     canyon = generate_canyon(CanyonId.parse(run["canyon"]))
     fig, axes = plt.subplots(
@@ -54,20 +63,20 @@ def plot_fig4(snaps: list[dict[str, Any]], run: dict[str, Any], policy: dict[str
         row[0].imshow(snap["image"])
         row[0].set_title(f"frame t={snap['step']}, action taken {snap['action']:+.0f}", fontsize=8)
         row[0].axis("off")
-        if kind == "depth":
+        if plot.style == "bins":
             row[1].plot(bearings, snap["true_bins"], "r-o", ms=3, label="true depth at t+1 (taken action)")
             for a, pred in zip(actions, snap["values"], strict=True):
                 row[1].plot(bearings, pred, "--", label=f"predicted, {ACTION_NAMES.get(a, a)}")
             row[1].invert_xaxis()
             row[1].set_xlabel("bearing (°, left → right)", fontsize=8)
-            row[1].set_ylabel("depth (m)", fontsize=8)
-            row[1].set_ylim(0, 2.2)
+            row[1].set_ylabel(plot.label, fontsize=8)
+            row[1].set_ylim(*plot.limits)
             row[1].legend(fontsize=6, loc="lower right")
         else:
             names = [ACTION_NAMES.get(a, str(a)) for a in actions]
             row[1].bar(names, snap["values"], color="tab:purple")
-            row[1].set_ylim(0, 1)
-            row[1].set_ylabel("P(collision within 5 frames)", fontsize=8)
+            row[1].set_ylim(*plot.limits)
+            row[1].set_ylabel(plot.label, fontsize=8)
         row[1].tick_params(labelsize=7)
         x, y, _ = snap["pose"]
         draw_run(row[2], canyon, run["poses"], span=y + 4)

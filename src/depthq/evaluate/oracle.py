@@ -1,8 +1,8 @@
 """Oracles: the selection rules fed with the simulator's truth, and how often a policy agrees with them
 along its own runs (docs/design.md#oracles).
 
-An `Oracle` is a perfect predictor of a training signal, turned into an action by the rule a learned
-net of that signal uses:
+An `Oracle` is a perfect predictor of a network's training signal, turned into an action by that
+network's rule (`Network.true_scores`, `Network.choose`):
 
 - `depth`, lookahead K: the noise-free depth bins 1 … K frames ahead of each candidate action held
   (K = 1: Depth-Q-Net's target), scored by the selection rule (`Selection`: the farthest nearest bin;
@@ -27,31 +27,30 @@ from typing import Any
 
 import numpy as np
 
-from depthq.control.action_selection import ACTIONS, TIE_TOL, Selection, pick_best, sequence_scores
+from depthq.control.action_selection import ACTIONS, Selection, pick_best
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE
+from depthq.networks import Network, get_network, network_names
 from depthq.sim.canyon import FAMILIES, Canyon, CanyonId, nearest_on_polyline
 from depthq.sim.env import COLLISIONS, CanyonEnv, EnvConfig
 from depthq.sim.sensors import bump, depth_bins, finish_scan
 from depthq.sim.world import WorldConfig, world_for
 
-SIGNALS = ("depth", "coll")
-DECISIVE_M = 0.01  # a depth oracle's step is decisive when its best and worst candidates differ by more
 BEFORE_COLLISION_S = 2.0  # "the last seconds before a collision"
 
 
 @dataclass(frozen=True)
 class Oracle:
-    """A perfect predictor of `signal` ("depth" or "coll") `lookahead` frames ahead, with the rule
-    that picks an action from it (`selection`: a depth oracle's, for K > 1)."""
+    """A perfect predictor of the network `signal` names ("depth" or "coll") `lookahead` frames ahead,
+    with the rule that picks an action from it (`selection`: a depth oracle's, for K > 1)."""
 
     signal: str = "depth"
     lookahead: int = 1
     selection: Selection = field(default_factory=Selection)
 
     def __post_init__(self) -> None:
-        if self.signal not in SIGNALS:
-            raise ConfigError(f"oracle signal must be one of {SIGNALS}, got {self.signal!r}")
+        if self.signal not in network_names():
+            raise ConfigError(f"oracle signal must be one of {network_names()}, got {self.signal!r}")
         k = self.lookahead
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ConfigError(f"oracle lookahead must be an integer >= 1, got {k!r}")
@@ -65,20 +64,25 @@ class Oracle:
             k = int(lookahead) if lookahead else 1
         except ValueError:
             raise ConfigError(f"oracle {text!r}: lookahead must be an integer, e.g. depth:3") from None
-        if rule and signal != "depth":
+        if rule and not (signal in network_names() and get_network(signal).uses_selection):
             raise ConfigError(f"oracle {text!r}: only a depth oracle takes a rule")
         return cls(signal, k, Selection(rule) if rule else Selection())
 
+    @property
+    def network(self) -> Network:
+        """The network whose signal it predicts."""
+        return get_network(self.signal)
+
     def score(self, bins: np.ndarray, bumped: np.ndarray) -> np.ndarray:
         """Each candidate's score from its true bins (N, K, bins) and bump flags (N,)."""
-        return bumped.astype(np.float64) if self.signal == "coll" else sequence_scores(bins, self.selection)
+        return self.network.true_scores(bins, bumped, self.selection)
 
     def pick(self, scores: np.ndarray) -> float:
         """The action its rule takes: the best score (depth: highest; coll: lowest), ties straight."""
-        return pick_best(scores, np.array(ACTIONS), self.signal == "depth", TIE_TOL[self.signal])
+        return pick_best(scores, np.array(ACTIONS), self.network.maximise, self.network.tie_tol)
 
     def __str__(self) -> str:
-        rule = f":{self.selection.rule}" if self.signal == "depth" and self.lookahead > 1 else ""
+        rule = f":{self.selection.rule}" if self.network.uses_selection and self.lookahead > 1 else ""
         return f"{self.signal}:{self.lookahead}{rule}"
 
 
@@ -241,19 +245,18 @@ def agreement(
                 if policy is not None:
                     values = policy.values(sim.frame(pose, seed=t))
                     rows["predicted"].append(values)
-                    rows["predicted_scores"].append(
-                        sequence_scores(values, policy.selection) if policy.kind == "depth" else values)
+                    rows["predicted_scores"].append(policy.network.scores(values, policy.selection))
                 rows["true_bins"].append(true_bins)
                 taken = int(np.abs(candidates - action).argmin())
-                best = scores.max() if oracle.signal == "depth" else scores.min()
+                best = scores.max() if oracle.network.maximise else scores.min()
                 spread = scores.max() - scores.min()
                 rows["canyon"].append(c)
                 rows["step"].append(t)
                 rows["policy"].append(float(action))
                 rows["oracle"].append(choice)
                 rows["scores"].append(scores)
-                rows["decisive"].append(spread > (DECISIVE_M if oracle.signal == "depth" else 0.5))
-                rows["agrees"].append(abs(scores[taken] - best) <= TIE_TOL[oracle.signal])
+                rows["decisive"].append(spread > oracle.network.decisive)
+                rows["agrees"].append(abs(scores[taken] - best) <= oracle.network.tie_tol)
                 rows["to_collision_s"].append((len(actions) - t) / hz if collided else np.inf)
     finally:
         sim.close()
@@ -264,8 +267,7 @@ def agreement(
     def share(mask: np.ndarray) -> float | None:
         return float(agrees[mask].mean()) if mask.any() else None
 
-    depth_policy = policy is not None and policy.kind == "depth"
-    return {**_prediction_summary(arrays, oracle, late, depth_policy), **{
+    return {**_prediction_summary(arrays, oracle, late, None if policy is None else policy.network), **{
         "evaluation": str(folder),
         "policy": summary["policy"].get("policy"),
         "oracle": str(oracle),
@@ -285,19 +287,21 @@ def agreement(
 
 
 def _prediction_summary(
-    arrays: dict[str, np.ndarray], oracle: Oracle, late: np.ndarray, depth_policy: bool
+    arrays: dict[str, np.ndarray], oracle: Oracle, late: np.ndarray, network: Network | None
 ) -> dict[str, Any]:
-    """What the re-predicted values say, where they exist and are the oracle's kind of score (a depth
-    policy against a depth oracle of its lookahead): how far each candidate's predicted score is from
+    """What the re-predicted values say (by the policy's `network`), where they exist and are the
+    oracle's kind of score (a depth policy against a depth oracle of its lookahead): how far each
+    candidate's predicted score is from
     the true one, how far apart the candidates are in truth and in prediction (the action's effect),
     and how often a fresh draw of pixel noise changes the policy's decision."""
-    if "predicted_scores" not in arrays:
+    if "predicted_scores" not in arrays or network is None:
         return {}
     predicted, recorded = arrays["predicted_scores"], arrays["policy"]
     # The policy's own rule picks: a Depth-Q-Net the highest score, a Coll-Q-Net the lowest probability.
-    choice = np.array(ACTIONS)[predicted.argmax(1) if depth_policy else predicted.argmin(1)]
+    choice = np.array(ACTIONS)[predicted.argmax(1) if network.maximise else predicted.argmin(1)]
     out: dict[str, Any] = {"same_decision_new_noise": float((choice == recorded).mean())}
-    if depth_policy and oracle.signal == "depth" and predicted.shape == arrays["scores"].shape:
+    same = network.name == oracle.signal and network.uses_selection
+    if same and predicted.shape == arrays["scores"].shape:
         error, truth = np.abs(predicted - arrays["scores"]), arrays["scores"]
         for name, mask in (("", np.ones_like(late)), ("_before_collision", late)):
             if mask.any():

@@ -21,7 +21,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.evaluate.figures import ACTION_NAMES, bin_bearings
+from depthq.evaluate.figures import ACTION_NAMES, DEPTH_PLOT, bin_bearings, value_plot
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.topdown import draw_run
 
@@ -34,17 +34,19 @@ def write_video(
 ) -> None:
     """Encode `frames` (per decision: image, values or None, true_bins, pose, action) to `path`,
     atomically (a temporary sibling renamed when complete)."""
-    kind, actions = policy.get("kind"), policy.get("actions", [-1.0, 0.0, 1.0])
+    actions = policy.get("actions", [-1.0, 0.0, 1.0])
     has_values = frames[0]["values"] is not None
+    plot = value_plot(policy) if has_values else DEPTH_PLOT  # without values: the true depth alone
+    bars_shown = plot.style == "bars"
     fig = plt.figure(figsize=(SIZE_PX[0] / 100, SIZE_PX[1] / 100), dpi=100)
     cam, pred, top = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1.45, 1.6, 0.5]})
     image = cam.imshow(frames[0]["image"])
     cam.axis("off")
     bearings = bin_bearings()
-    if kind == "coll" and has_values:
+    if bars_shown:
         bars = pred.bar([ACTION_NAMES.get(a, str(a)) for a in actions], frames[0]["values"], color="0.6")
-        pred.set_ylim(0, 1)
-        pred.set_ylabel("P(collision within 5 frames)", fontsize=8)
+        pred.set_ylim(*plot.limits)
+        pred.set_ylabel(plot.label, fontsize=8)
     else:
         (truth,) = pred.plot(bearings, frames[0]["true_bins"], "r-o", ms=3, label="true depth at t+1")
         lines = []
@@ -54,9 +56,9 @@ def write_video(
                 for a, v in zip(actions, frames[0]["values"], strict=True)
             ]
         pred.invert_xaxis()
-        pred.set_ylim(0, 2.2)
+        pred.set_ylim(*plot.limits)
         pred.set_xlabel("bearing (°, left → right)", fontsize=8)
-        pred.set_ylabel("depth (m)", fontsize=8)
+        pred.set_ylabel(plot.label, fontsize=8)
         pred.legend(fontsize=7, loc="lower right")
     pred.tick_params(labelsize=7)
     poses = run["poses"]
@@ -69,7 +71,7 @@ def write_video(
     )
     fig.tight_layout()
     # Blitting: axes, ticks and walls are drawn once; each frame redraws only what moves (≈ 8× faster).
-    moving = [image, clock, path_line, robot, *(bars if kind == "coll" and has_values else [truth, *lines])]
+    moving = [image, clock, path_line, robot, *(bars if bars_shown else [truth, *lines])]
     for artist in moving:
         artist.set_animated(True)
     fig.canvas.draw()
@@ -95,7 +97,7 @@ def write_video(
             image.set_data(frame["image"])
             clock.set_text(f"t = {step / fps:4.1f} s   action {frame['action']:+.0f}")
             chosen = int(np.argmin(np.abs(np.asarray(actions) - frame["action"])))
-            if kind == "coll" and has_values:
+            if bars_shown:
                 for k, (bar, v) in enumerate(zip(bars, frame["values"], strict=True)):
                     bar.set_height(v)
                     bar.set_color("tab:purple" if k == chosen else "0.6")

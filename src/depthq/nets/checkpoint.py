@@ -1,5 +1,6 @@
 """The checkpoint format, in one place: config.json (what was trained, for which policy, on which
-data), the weight files and their digests, the format's version, and reading a network back.
+data), the weight files and their digests, the format's version, and reading one back (its network is
+built by `depthq.networks.load_qnet`, which knows the networks).
 
 This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
 `depthq.train.folder`) and `depthq.policies` (which read them), so a policy needs nothing from
@@ -59,9 +60,9 @@ from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import from_dict, provenance, to_dict
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
-from depthq.nets.heads import HEAD_KINDS, HeadConfig, QNet, build_head
+from depthq.nets.heads import HeadConfig, QNet
 from depthq.nets.migrations import migrate_checkpoint
-from depthq.nets.trunk import TRUNKS, build_trunk
+from depthq.nets.trunk import TRUNKS
 
 CONFIG = "config.json"
 FORMAT = "depthq-checkpoint"
@@ -254,10 +255,11 @@ def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Pa
         raise ConfigError(f"{path}: weights do not fit the network of its config.json ({err})") from err
 
 
-def load_qnet(
+def read_checkpoint(
     folder: Path, weights: str | None = None, model: str | None = None, trunk: str | None = None
-) -> tuple[QNet, dict[str, Any]]:
-    """The trained network in `folder` in eval mode, and its config.json (`read_config`).
+) -> tuple[dict[str, Any], dict[str, torch.Tensor], Path]:
+    """A checkpoint folder's config.json (`read_config`), the tensors of its weights and their file;
+    `depthq.networks.load_qnet` builds the network from them.
 
     `weights` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.weights`).
     `model` / `trunk`, when given, must be what the folder holds. A missing, incomplete or corrupted
@@ -271,7 +273,7 @@ def load_qnet(
     record = read_config(folder)
     head = record.get("head")
     kind = head.get("kind") if isinstance(head, dict) else None
-    if kind not in HEAD_KINDS:
+    if not isinstance(kind, str) or not kind:
         raise ConfigError(f"{folder / CONFIG}: unknown model kind {kind!r}")
     for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
         if asked is not None and asked != held:
@@ -289,6 +291,4 @@ def load_qnet(
             why = "no epoch finished yet?"
         raise ConfigError(f"{folder}: no {path.name} for weights {chosen!r} ({why})")
     tensors, _ = read_weights(path)
-    net = QNet(build_trunk(str(record.get("trunk"))), build_head(from_dict(HeadConfig, head)))
-    load_trainable_state(net, tensors, path)
-    return net.eval(), record
+    return record, tensors, path

@@ -25,33 +25,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from depthq.data.labels import check_lookahead
 from depthq.errors import ConfigError
+from depthq.nets.losses import LossFn
 from depthq.nets.trunk import Trunk
 
-HeadKind = Literal["depth", "coll"]
-HEAD_KINDS: tuple[str, ...] = ("depth", "coll")
 # "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
 # "depth_first": the current bins from the feature, then the next bins from them and the action.
 HEAD_FORMS: tuple[str, ...] = ("concat", "per_action", "depth_first")
-# A one-step Depth-Q-Net's default form (docs/oracle_gap.md#depth-first: it drives the hard `val` canyons
-# twice as far as "concat"); any other head knows only "concat".
-DEFAULT_DEPTH_FORM = "depth_first"
 ANCHORS = (-1.0, 0.0, 1.0)  # the actions a "per_action" head predicts; a command in between blends two
 COLL_HIDDEN = 25
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
-
-
-def default_form(kind: str, lookahead: int) -> str:
-    """The head form a `kind` head looking `lookahead` steps ahead gets unless told."""
-    return DEFAULT_DEPTH_FORM if kind == "depth" and lookahead == 1 else "concat"
 
 
 def _positive_int(value: object) -> bool:
@@ -61,22 +50,23 @@ def _positive_int(value: object) -> bool:
 @dataclass(frozen=True)
 class HeadConfig:
     """Shape of a head; `feature_dim` must equal the trunk's. Its settings have no defaults here:
-    `TrainConfig` declares them (`TrainConfig.head`), a checkpoint's record holds them (#33)."""
+    `TrainConfig` declares them (`TrainConfig.head`), a checkpoint's record holds them (#33). Which
+    network's head it is (`kind`), and that network's own rules for it, are `depthq.networks`'."""
 
-    kind: HeadKind
+    kind: str  # the network's name (`depthq.networks.registry`)
     feature_dim: int
     hidden: int
     dropout: float
     action_scale: float  # the action enters the hidden layer as action_scale · a
-    lookahead: int  # actions in, steps of bins out (Depth-Q-Net only; `TrainConfig.lookahead`)
+    lookahead: int  # actions in, steps of outputs (`TrainConfig.lookahead`)
     feature_projection: int  # P > 0: the feature projected to P numbers first; 0: none
     form: str  # one of HEAD_FORMS (`TrainConfig.head_form`)
     output_bias: float  # the initial bias of a layer that outputs depth bins, m (`TrainConfig.output_bias`)
     n_bins: int = 26  # the depth bins (`depthq.sim.sensors.BinConfig`); not a training setting
 
     def __post_init__(self) -> None:
-        if self.kind not in HEAD_KINDS:
-            raise ConfigError(f"HeadConfig.kind must be one of {HEAD_KINDS}, got {self.kind!r}")
+        if not isinstance(self.kind, str) or not self.kind:
+            raise ConfigError(f"HeadConfig.kind must be a network's name, got {self.kind!r}")
         for name in ("feature_dim", "hidden", "n_bins", "lookahead"):
             value = getattr(self, name)
             if not _positive_int(value):
@@ -86,20 +76,11 @@ class HeadConfig:
             raise ConfigError(f"HeadConfig.dropout must be in [0, 1), got {self.dropout!r}")
         if not self.action_scale > 0:
             raise ConfigError(f"HeadConfig.action_scale must be > 0, got {self.action_scale!r}")
-        check_lookahead(self.kind, self.lookahead, "HeadConfig.lookahead")
         if self.form not in HEAD_FORMS:
             raise ConfigError(f"HeadConfig.form must be one of {HEAD_FORMS}, got {self.form!r}")
-        if self.form != "concat" and (self.kind != "depth" or self.lookahead != 1):
-            raise ConfigError(
-                f"HeadConfig.form {self.form!r} is a one-step Depth-Q-Net's (kind depth, lookahead 1), "
-                f"got kind {self.kind!r}, lookahead {self.lookahead!r}"
-            )
         bias = self.output_bias
         if isinstance(bias, bool) or not isinstance(bias, int | float) or not 0 <= bias < math.inf:
             raise ConfigError(f"HeadConfig.output_bias must be a finite number >= 0, got {bias!r}")
-        if bias and self.kind != "depth":
-            raise ConfigError(f"HeadConfig.output_bias {bias}: a Depth-Q-Net's (its outputs are depth bins), "
-                              f"got kind {self.kind!r}")
         p = self.feature_projection
         if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p <= self.feature_dim:
             raise ConfigError(
@@ -165,6 +146,20 @@ class Head(nn.Module):
             if isinstance(module, nn.Linear):  # Glorot init, as in the paper's TensorFlow code
                 nn.init.xavier_uniform_(module.weight)
                 nn.init.zeros_(module.bias)
+
+    def training_outputs(
+        self, feature: torch.Tensor, action: torch.Tensor, current: torch.Tensor | None
+    ) -> tuple[torch.Tensor, ...]:
+        """What training fits, from features (B, D), actions and the frames' own bins `current`
+        (B, n_bins; None unless the data has them): the head's output. Run under the trainer's precision."""
+        return (self(feature, action),)
+
+    def training_loss(
+        self, outputs: tuple[torch.Tensor, ...], target: torch.Tensor, current: torch.Tensor | None,
+        loss_fn: LossFn,
+    ) -> torch.Tensor:
+        """The training loss of `training_outputs` (float32): the network's `loss_fn` of the output."""
+        return loss_fn(outputs[0], target)[0]
 
     def hidden_features(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """(B, D), actions (B,) or (B, 1) (lookahead K > 1: sequences (B, K)) → (B, hidden)."""
@@ -243,6 +238,24 @@ class DepthFirstHead(Head):
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return self.advance(self.perceive(feature).clamp(min=0.0), action)
 
+    def training_outputs(
+        self, feature: torch.Tensor, action: torch.Tensor, current: torch.Tensor | None
+    ) -> tuple[torch.Tensor, ...]:
+        """Each part on its own input (docs/design.md#depth-first): the dynamics' next bins from the true
+        current ones, and the perception's current bins."""
+        if current is None:
+            raise ConfigError("a depth_first head trains on its samples' current bins; the batch has none")
+        return self.advance(current, action), self.perceive(feature)
+
+    def training_loss(
+        self, outputs: tuple[torch.Tensor, ...], target: torch.Tensor, current: torch.Tensor | None,
+        loss_fn: LossFn,
+    ) -> torch.Tensor:
+        """Each part fitted to its own target: the dynamics by `loss_fn` to the next bins, the
+        perception to the current bins (L1 over all of them, invalid as the clip)."""
+        advanced, perceived = outputs
+        return loss_fn(advanced, target)[0] + (perceived - current).abs().mean()
+
 
 def anchor_weights(action: torch.Tensor) -> torch.Tensor:
     """(B,) commands → (B, 3) weights of the ANCHORS: linear interpolation, clipped to [−1, 1]."""
@@ -265,13 +278,6 @@ class CollHead(Head):
 def probability(logits: torch.Tensor) -> torch.Tensor:
     """Coll-Q-Net logits → P(collision within H)."""
     return torch.sigmoid(logits)
-
-
-def build_head(config: HeadConfig) -> Head:
-    """The head `config.kind` names."""
-    if config.kind == "coll":
-        return CollHead(config)
-    return DepthFirstHead(config) if config.form == "depth_first" else DepthHead(config)
 
 
 class QNet(nn.Module):

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 import torch.nn.functional as F
 
@@ -12,6 +14,8 @@ DEPTH_CLIP = 2.0  # metres; docs/design.md#bins
 CLIP_TOLERANCE = 1e-6  # a target within this of the clip counts as "at the clip" (float32 round-off)
 DEPTH_LOSSES = ("original", "valid_mean", "relative")
 RELATIVE_FLOOR = 0.05  # m: "relative" divides by the target, never by less than this
+# A training loss: (outputs, targets) → (batch loss, per-sample loss (B,)); a network's (`depthq.networks`).
+LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 
 
 def depth_valid_mask(target: torch.Tensor, clip: float = DEPTH_CLIP) -> torch.Tensor:

@@ -23,10 +23,13 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError, DataError
 from depthq.sim.canyon import PAPER
+
+# The selection rule a record before version 3 acted by, by its head's kind: the two networks there were.
+_LEGACY_RULES = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_probability"}
 
 # What every checkpoint before version 3 was made for: the simulated camera's 308 × 410 frames, and
 # its dataset's rate, or 4 Hz (the default rate then) when its manifest is not found.
@@ -104,7 +107,7 @@ def checkpoint_v2(record: dict[str, Any]) -> dict[str, Any]:
             "decision_hz": float(world.get("decision_hz", _LEGACY_DECISION_HZ)),
             "frame_size": [camera["height"], camera["width"]],
             "actions": list(ACTIONS),
-            "rule": RULE_OF.get(kind, ""),
+            "rule": _LEGACY_RULES.get(kind, ""),
             "bins": (env or {}).get("bins"),
         },
     }

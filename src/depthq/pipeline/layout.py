@@ -14,8 +14,6 @@ from typing import Any
 
 from depthq.nets.migrations import FOLDER_KEYS
 
-NETS = ("depth", "coll")
-
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:
     """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant (a tuple value's items

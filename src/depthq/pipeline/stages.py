@@ -36,6 +36,7 @@ from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.migrations import sweep_setup
 from depthq.nets.trunk import TRUNKS
+from depthq.networks import get_network
 from depthq.parallel import LOCAL, Executor, Job
 from depthq.pipeline.sweep import Sweep
 from depthq.train.config import TrainConfig
@@ -93,7 +94,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     every model's evaluation is a task of its own (`depthq.parallel.Job`)."""
     data = out / "data"
     collect_config, eval_config = sweep.collect, sweep.eval_config()
-    # A model in several variants (a Coll-Q-Net in a lookahead sweep, `DEPTH_ONLY`) runs once.
+    # A model in several variants (a Coll-Q-Net in a lookahead sweep, `Model.settings`) runs once.
     models = list({m.name: m for m in sweep.models()}.values())
     configs = {m: sweep.train_config(m, str(data)) for m in models}
     frozen = sorted({(c.trunk, c.input_size) for c in configs.values() if TRUNKS[c.trunk].frozen})
@@ -144,11 +145,12 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
 
 
 def best_depth_eval(out: Path, sweep: Sweep) -> Path | None:
-    """The Depth-Q-Net evaluation with the longest mean distance (for Fig. 4 and its video)."""
+    """The evaluation with the longest mean distance of the featured network (`Network.featured`:
+    Depth-Q-Net), for Fig. 4 and its video."""
     best, best_distance = None, -1.0
     for model in sweep.models():
         path = out / "eval" / model.name / "summary.json"
-        if model.net != "depth" or not path.is_file():
+        if not get_network(model.net).featured or not path.is_file():
             continue
         if (distance := read_json(path)["summary"]["distance_mean"]) > best_distance:
             best, best_distance = path.parent, distance

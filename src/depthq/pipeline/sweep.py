@@ -13,7 +13,7 @@ import itertools
 import json
 import re
 import typing
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from depthq.data.recorder import CollectConfig
@@ -21,7 +21,8 @@ from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path, parse_value
 from depthq.nets.migrations import RENAMED_SETTINGS
-from depthq.pipeline.layout import NETS, model_name, setting_text
+from depthq.networks import get_network, network_names
+from depthq.pipeline.layout import model_name, setting_text
 from depthq.sim.canyon import FAMILIES, eval_set, split_family
 from depthq.sim.world import world_for
 from depthq.train.config import TrainConfig
@@ -30,12 +31,6 @@ Variant = tuple[tuple[str, Any], ...]  # (TrainConfig field path, value) pairs; 
 Settings = tuple[tuple[str, Any], ...]  # (field path, value) pairs: a partial config, the rest its defaults
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
-# Settings only Depth-Q-Net has (`TrainConfig.lookahead`, its loss, its labels' source, its bins'
-# initial bias): a Coll-Q-Net in a variant that sets them is the variant without them, so `--set
-# lookahead=1,3,5` or `--set depth_loss=original,relative` trains each Coll-Q-Net once, under its own
-# name (and every variant's row shows it), rather than refusing a grid over both networks.
-DEPTH_ONLY = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
-              "output_bias")
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
 
 
@@ -57,8 +52,11 @@ class Model:
 
     @property
     def settings(self) -> Variant:
-        """The settings of `variant` its network has (`DEPTH_ONLY`)."""
-        return tuple((k, v) for k, v in self.variant if self.net == "depth" or k not in DEPTH_ONLY)
+        """The settings of `variant` its network has: a network's `unused_settings` (a Coll-Q-Net's
+        `lookahead`) are dropped, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
+        variant's row shows it)."""
+        unused = get_network(self.net).unused_settings
+        return tuple((k, v) for k, v in self.variant if k not in unused)
 
 
 @dataclass(frozen=True)
@@ -80,7 +78,7 @@ class Sweep:
     # What every evaluation sets besides its canyons and rate (EvalConfig field paths and values).
     evaluate: Settings = ()
     workers: int = 2
-    nets: tuple[str, ...] = NETS
+    nets: tuple[str, ...] = field(default_factory=network_names)  # the registered networks
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
 
     def __post_init__(self) -> None:
@@ -99,8 +97,9 @@ class Sweep:
                               f"{','.join(map(str, sorted(set(self.subsets))))}")
         if not self.seeds or min(self.seeds) < 0:
             raise ConfigError(f"sweep {self.name}: needs seeds >= 0, got {self.seeds}")
-        if not self.nets or set(self.nets) - set(NETS):
-            raise ConfigError(f"sweep {self.name}: networks must be some of {NETS}, got {self.nets}")
+        if not self.nets or set(self.nets) - set(network_names()):
+            raise ConfigError(f"sweep {self.name}: networks must be some of {network_names()}, "
+                              f"got {self.nets}")
         for values in (self.subsets, self.seeds, self.nets):
             if len(set(values)) != len(values):
                 raise ConfigError(f"sweep {self.name}: {values} repeats a value")
@@ -234,7 +233,7 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
 
 
 def differing(net: str, variant: Variant, train: Settings = ()) -> Variant:
-    """The settings of `variant` that `net` has (`DEPTH_ONLY`) and whose values differ from its own
+    """The settings of `variant` that `net` has (`Model.settings`) and whose values differ from its own
     under a sweep's `train` settings: what names its models' folders (`Model.differs`)."""
     own = build_config(TrainConfig, {"model": net, "data": "data", "runs": 1, "seed": 0} | dict(train))
     settings = Model(net, 1, 0, variant).settings

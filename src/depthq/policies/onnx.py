@@ -17,6 +17,7 @@ import numpy as np
 from depthq.control.action_selection import Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.errors import ConfigError, DataError
+from depthq.networks import get_network
 
 
 class OnnxPolicy(GreedyPolicy):
@@ -53,7 +54,8 @@ class OnnxPolicy(GreedyPolicy):
             self.decision_hz = float(record["policy"]["decision_hz"]) if "policy" in record else None
         except (KeyError, ValueError, TypeError) as err:
             raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
-        self._set_candidates(kind, actions, lookahead, selection)
+        self.network = get_network(kind)
+        self._set_candidates(kind, self.network.choose, actions, lookahead, selection)
         self._actions = self.candidates.astype(np.float32)
         self.runtime = f"onnxruntime {ort.__version__}"
         self.path = path

@@ -16,9 +16,10 @@ from depthq.control.action_selection import ACTIONS, Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import chosen_weights, load_qnet, policy_record, weights_stem
-from depthq.nets.heads import QNet, probability
+from depthq.nets.checkpoint import chosen_weights, policy_record, weights_stem
+from depthq.nets.heads import QNet
 from depthq.nets.trunk import preprocess
+from depthq.networks import get_network, load_qnet
 
 # Frames per trunk call in `act_batch` (docs/design.md#lockstep): up to 15 a call, each frame's features
 # were those of a one-frame call on both CPUs measured (torch 2.13, one thread), not at 16.
@@ -26,9 +27,10 @@ BATCH_FRAMES = 8
 
 
 class QNetPolicy(GreedyPolicy):
-    """Greedy policy of a Q-net. `last_values` holds the latest per-action predictions (for Fig. 4):
-    (N, n_bins) depth bins for Depth-Q-Net (a lookahead one's: step t+1 of each action held), (N,)
-    collision probabilities for Coll-Q-Net. `selection`: how a Depth-Q-Net scores its candidates."""
+    """Greedy policy of a Q-net of the network `kind` names (`network`). `last_values` holds the latest
+    per-action predictions (for Fig. 4): (N, n_bins) depth bins for Depth-Q-Net (a lookahead one's: step
+    t+1 of each action held), (N,) collision probabilities for Coll-Q-Net. `selection`: how a
+    Depth-Q-Net scores its candidates."""
 
     def __init__(
         self,
@@ -42,13 +44,12 @@ class QNetPolicy(GreedyPolicy):
         weights: str | None = None,
         selection: Selection | None = None,
     ) -> None:
-        if kind not in ("depth", "coll"):
-            raise ConfigError(f"unknown Q-net kind {kind!r}; expected 'depth' or 'coll'")
+        self.network = get_network(kind)
         if not actions or any(not -1 <= a <= 1 for a in actions):
             raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
         self.device = torch.device(device)
         self.net = net.to(self.device).eval()
-        self._set_candidates(kind, actions, net.head.config.lookahead, selection)
+        self._set_candidates(kind, self.network.choose, actions, net.head.config.lookahead, selection)
         self._actions_t = torch.tensor(self.candidates, dtype=torch.float32, device=self.device)
         self.input_size = input_size
         self.name = name
@@ -74,7 +75,7 @@ class QNetPolicy(GreedyPolicy):
             kind,
             policy_record(config).actions if actions is None else actions,
             input_size=int(config["train"]["input_size"]),
-            name=f"{'DQN' if kind == 'depth' else 'CQN'}:{Path(folder).name}",
+            name=f"{get_network(kind).label}:{Path(folder).name}",
             source=str(folder),
             device=device,
             weights=weights_stem(chosen_weights(config, weights)),
@@ -98,9 +99,9 @@ class QNetPolicy(GreedyPolicy):
         """`values` of F frames' features (F, D), (F, N, …): one head call over all their candidates
         (`QNet.candidate_outputs`)."""
         out = self.net.candidate_outputs(features, self._actions_t)
-        if self.kind == "coll":  # per frame: a vectorised sigmoid's tail elements take a scalar path
-            out = torch.stack([probability(logits) for logits in out])
-        return out.cpu().numpy()
+        # per frame: a vectorised sigmoid's tail elements take a scalar path (a frame's values would
+        # depend on how many frames were decided together)
+        return torch.stack([self.network.output(raw) for raw in out]).cpu().numpy()
 
     def act_batch(self, observations: Sequence[Observation]) -> list[float]:
         """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, one head pass

@@ -11,8 +11,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from depthq.networks import get_network, network_names
 from depthq.pipeline.sweep import Sweep, variant_label
-from depthq.report.tables import NET_LABELS, PAPER_TABLE1, collect_results, interval, per_seed
+from depthq.report.tables import collect_results, interval, per_seed
 
 
 def _read_metrics(path: Path) -> dict[str, np.ndarray]:
@@ -49,12 +50,13 @@ def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
             loss_ax.plot(epoch, train, "--", color=colour, lw=1, label=f"{n} runs, train")
             loss_ax.plot(epoch, val, "-", color=colour, lw=1.5, label=f"{n} runs, validation")
             std_ax.plot(epoch, std, "-", color=colour, lw=1.5, label=f"{n} runs")
-        unit = "L1 on valid bins (m)" if net == "depth" else "cross-entropy"
-        loss_ax.set_title(f"{NET_LABELS[net]}: {unit}" + (f" ({variant_label(first)})" if first else ""))
+        network = get_network(net)
+        variant = f" ({variant_label(first)})" if first else ""
+        loss_ax.set_title(f"{network.label}: {network.loss_title}{variant}")
         loss_ax.set_ylabel("loss")
         if loss_ax.lines:  # none when no model of this network has a training log yet
             loss_ax.legend(fontsize=7, ncol=2)
-        std_ax.set_title(f"{NET_LABELS[net]}: std of the validation loss over a batch")
+        std_ax.set_title(f"{network.label}: std of the validation loss over a batch")
         std_ax.set_xlabel("epoch (100 training batches of 64)")
         std_ax.set_ylabel("std")
         if std_ax.lines:
@@ -69,8 +71,7 @@ def plot_success_vs_runs(out: Path, sweep: Sweep, path: Path) -> None:
     mean over seeds with its 95 % interval, one line per network and variant."""
     results = collect_results(out, sweep)
     variants = sweep.variants()
-    colours = {"depth": "tab:blue", "coll": "tab:orange"}
-    nets = [net for net in ("depth", "coll") if net in sweep.nets]
+    nets = [net for net in network_names() if net in sweep.nets]
     lines = [(net, k, variant) for net in nets for k, variant in enumerate(variants)]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for line, (net, k, variant) in enumerate(lines):
@@ -85,14 +86,16 @@ def plot_success_vs_runs(out: Path, sweep: Sweep, path: Path) -> None:
                 low.append(np.mean(succ) - ci[0])
                 high.append(ci[1] - np.mean(succ))
         if xs:
-            label = NET_LABELS[net] + (f", {variant_label(variant)}" if variant else "")
-            ax.errorbar(xs, mean, yerr=[low, high], fmt="osv^DP"[k % 6] + "-", capsize=3, color=colours[net],
+            label = get_network(net).label + (f", {variant_label(variant)}" if variant else "")
+            colour = get_network(net).colour
+            ax.errorbar(xs, mean, yerr=[low, high], fmt="osv^DP"[k % 6] + "-", capsize=3, color=colour,
                         alpha=1.0 - 0.5 * k / len(variants), label=label)
     for net in sweep.nets:
-        paper = [(n, PAPER_TABLE1[n][net][1]) for n in sweep.subsets if n in PAPER_TABLE1]
+        network = get_network(net)
+        paper = [(n, network.paper[n][1]) for n in sweep.subsets if n in network.paper]
         if paper:
-            label = f"{NET_LABELS[net]}, paper"
-            ax.plot(*zip(*paper, strict=True), "--", color=colours[net], alpha=0.6, label=label)
+            label = f"{network.label}, paper"
+            ax.plot(*zip(*paper, strict=True), "--", color=network.colour, alpha=0.6, label=label)
     seeds = len(sweep.seeds)
     ax.set_title(f"mean over {seeds} seeds, bars: 95 % interval" if seeds > 1 else "one seed")
     canyons = max((r["summary"]["runs"] for r in results.values()), default=20)

@@ -12,19 +12,15 @@ from scipy.stats import t as student_t
 
 from depthq.configio import read_json
 from depthq.data.stats import PAPER_TABLE2
+from depthq.networks import Network, get_network, network_names
 from depthq.pipeline.sweep import Model, Sweep, Variant, variant_label
 from depthq.sim.canyon import FAMILIES, split_family
 
-NET_LABELS = {"coll": "CQN", "depth": "DQN"}
-# The paper's Table I (mean over its 3 seeds), for comparison only: runs → net → (distance m, successes /20).
-PAPER_TABLE1: dict[int, dict[str, tuple[float, float]]] = {
-    50: {"coll": (1.07, 0.0), "depth": (1.68, 0.0)},
-    100: {"coll": (1.04, 0.0), "depth": (4.91, 0.7)},
-    200: {"coll": (2.69, 0.0), "depth": (12.19, 8.0)},
-    500: {"coll": (6.72, 2.7), "depth": (21.96, 20.0)},
-    700: {"coll": (8.32, 4.7), "depth": (22.21, 20.0)},
-    900: {"coll": (14.14, 11.3), "depth": (22.30, 20.0)},
-}
+
+def paper_networks() -> list[Network]:
+    """The networks with the paper's Table I (`Network.paper`, mean over its 3 seeds, for comparison
+    only), in the order registered."""
+    return [get_network(name) for name in network_names() if get_network(name).paper]
 
 
 def interval(values: list[float]) -> tuple[float, float] | None:
@@ -91,7 +87,8 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
     for variant, n, row in _groups(sweep):
         for net in sorted(sweep.nets):
             runs = per_seed(results, net, n, variant)
-            label = NET_LABELS[net]
+            network = get_network(net)
+            label = network.label
             row[f"distance {label}"] = _cell([r["summary"]["distance_mean"] for r in runs], ".2f", True)
             row[f"success {label}"] = _cell([r["summary"]["successes"] for r in runs], ".1f", True)
             row[f"imitation {label}"] = _cell([r["summary"]["imitation_loss_mean"] for r in runs], ".3f")
@@ -102,10 +99,12 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
                 )
                 row[f"closest {label}"] = _cell([r["summary"]["closest_mean"] for r in runs], ".2f")
             row[f"seeds {label}"] = str(len(runs))
-            offline = "cross-entropy CQN" if net == "coll" else "abs diff DQN"
+            offline = f"{network.metric_title} {label}"
             row[offline] = _cell([r["offline"]["value"] for r in runs if "offline" in r], ".3f")
-        paper = PAPER_TABLE1.get(n)
-        row["paper: success CQN / DQN"] = f"{paper['coll'][1]} / {paper['depth'][1]}" if paper else "–"
+        published = sorted(paper_networks(), key=lambda network: network.name)  # as the columns: by name
+        cells = [str(network.paper[n][1]) for network in published if n in network.paper]
+        heading = " / ".join(network.label for network in published)
+        row[f"paper: success {heading}"] = " / ".join(cells) if cells else "–"
         rows.append(row)
     return rows
 
@@ -118,10 +117,10 @@ def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
         for net in sweep.nets:
             summaries = [r["summary"] for r in per_seed(results, net, n, variant)]
             cells = [f"{s['successes']}/{s['distance_mean']:.1f}" for s in summaries]
-            row[f"{NET_LABELS[net]}: successes/m per seed"] = ", ".join(cells) or "–"
-        paper = PAPER_TABLE1.get(n)
-        cells = [f"{paper[net][1]}/{paper[net][0]}" for net in ("depth", "coll")] if paper else ["–"]
-        row["paper DQN, CQN (mean)"] = ", ".join(cells)
+            row[f"{get_network(net).label}: successes/m per seed"] = ", ".join(cells) or "–"
+        published = paper_networks()
+        cells = [f"{net.paper[n][1]}/{net.paper[n][0]}" for net in published if n in net.paper]
+        row[f"paper {', '.join(network.label for network in published)} (mean)"] = ", ".join(cells or ["–"])
         rows.append(row)
     return rows
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from depthq.flags import add_config_arguments
 from depthq.nets.device import DEVICE_HELP
+from depthq.networks import network_names
 from depthq.parallel import add_executor_arguments, executor_from
 
 # The dataset's settings a sweep may change (its collection config, `Sweep.collect`), by their flags of
@@ -36,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seeds", help="training seeds, e.g. 0-9 or 0,3,7 (default: the preset's)")
     p.add_argument("--sizes", help="training-set sizes in runs, e.g. 50,200 (default: the preset's)")
-    p.add_argument("--nets", help="depth, coll or depth,coll (default: both)")
+    nets = ",".join(network_names())
+    p.add_argument("--nets", help=f"networks, comma-separated: some of {nets} (default: all)")
     p.add_argument(
         "--set",
         action="append",

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import torch
 
-from depthq.control.action_selection import ACTIONS, TIE_TOL
+from depthq.control.action_selection import ACTIONS
 from depthq.nets.heads import Head
+from depthq.networks import DepthQNet
 
 _STRAIGHT = ACTIONS.index(0.0)
 
@@ -28,7 +29,7 @@ def greedy_bins(head: Head, features: torch.Tensor) -> torch.Tensor:
     nearest = torch.where(bins > 0, bins, torch.inf).amin(dim=2)
     nearest = torch.where(torch.isfinite(nearest), nearest, 0.0)  # all bins 0: no prediction, score 0
     best = nearest.amax(dim=1, keepdim=True)
-    tied = nearest >= best - TIE_TOL["depth"]
+    tied = nearest >= best - DepthQNet.tie_tol
     pick = torch.where(tied[:, _STRAIGHT], _STRAIGHT, tied.float().argmax(dim=1))  # first tied otherwise
     return bins[torch.arange(len(features)), pick]
 

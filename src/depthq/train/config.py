@@ -9,21 +9,16 @@ from typing import Literal
 
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
-from depthq.data.labels import SampleConfig, check_lookahead
+from depthq.data.labels import SampleConfig
 from depthq.errors import ConfigError
+from depthq.flags import CHOICES
 from depthq.nets.checkpoint import WEIGHTS
-from depthq.nets.heads import HEAD_FORMS, HEAD_KINDS, HeadConfig, default_form
+from depthq.nets.heads import HEAD_FORMS, HeadConfig
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
+from depthq.networks import get_network, network_names
 
-# The original's rates: Depth-Q-Net 0.1, Coll-Q-Net 0.01 (docs/design.md#training). Coll-Q-Net's 0.01
-# under-trains it in our 40-epoch budget (the paper ran up to 1000): on 500 runs of the 4 Hz paper
-# dataset, seed 0, its validation loss (BCE over all validation samples) is 0.145 at 0.01 and 0.112
-# at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1
-# (`python -m research.val_choices`).
-# Hence 0.1 for both.
-DEFAULT_LR = {"depth": 0.1, "coll": 0.1}
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is
 # within 8 % of the best of 60 for Depth-Q-Net (0.151 vs 0.139 at 50) and 10 % for Coll-Q-Net (0.058
 # vs 0.053); best.safetensors keeps the best epoch. 40 epochs ≈ 80 s per model on 2 CPU cores.
@@ -73,12 +68,12 @@ class TrainConfig:
     An epoch is `train_batches` training batches then `val_batches` validation batches
     (docs/design.md#training).
     `runs` takes the first n usable training runs (the paper's nested subsets); None takes all.
-    `lr` None means the paper's rate for `model`; read the effective one from `learning_rate`.
+    `lr` None means the network's own rate (`Network.lr`); read the effective one from `learning_rate`.
     Settings whose default depends on other fields (`head_form`, `average`, `weights`; `lr`) are
     resolved in one place, `_resolve_defaults`.
     """
 
-    model: str  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
+    model: str = field(metadata={CHOICES: network_names})  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
     data: str  # the dataset folder (depthq collect --out)
     # The first n usable training runs (the paper's nested subsets); none: all of them.
     runs: int | None = None
@@ -171,8 +166,9 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_seed(self.seed)
-        if self.model not in HEAD_KINDS:
-            raise ConfigError(f"train.model must be one of {HEAD_KINDS}, got {self.model!r}")
+        if self.model not in network_names():
+            raise ConfigError(f"train.model must be one of {network_names()}, got {self.model!r}")
+        network = get_network(self.model)
         self._resolve_defaults()
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
@@ -181,7 +177,7 @@ class TrainConfig:
         _int_at_least("seed", self.seed, 0)
         for name in ("epochs", "train_batches", "val_batches", "batch_size", "input_size"):
             _int_at_least(name, getattr(self, name), 1)
-        check_lookahead(self.model, self.lookahead, "train.lookahead")
+        network.check_lookahead(self.lookahead, "train.lookahead")
         discount = self.lookahead_discount
         if isinstance(discount, bool) or not isinstance(discount, int | float) or not 0 < discount <= 1:
             raise ConfigError(f"train.lookahead_discount must be in (0, 1], got {discount!r}")
@@ -206,7 +202,7 @@ class TrainConfig:
         check_choices(self, "train")  # trunk, depth_loss, head_form, labels, weights, precision
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
-        self.head()  # the head's own rules (form, lookahead, projection size)
+        network.check_head(self.head())  # the head's rules (projection size) and its network's (form)
         self._check_bootstrap()
         if not isinstance(self.mirror, bool):
             raise ConfigError(f"train.mirror must be true or false, got {self.mirror!r}")
@@ -215,27 +211,26 @@ class TrainConfig:
                               f"but trunk {self.trunk!r} is trained with the head")
         self._check_snapshots()
         self._check_average()
-        if self.model == "coll" and self.labels != "lidar":
+        if self.labels not in network.label_sources:
             raise ConfigError(
-                f"train.labels {self.labels!r}: Coll-Q-Net learns from the bump, not from depth bins; "
-                "camera labels are Depth-Q-Net's (--model depth), use --labels lidar"
+                f"train.labels {self.labels!r}: {network.title} learns only from labels "
+                f"{network.label_sources}; use --labels {network.label_sources[0]}"
             )
 
     def _resolve_defaults(self) -> None:
         """The defaults that depend on other fields, all resolved here (before any check), so that a
         stored config names its choice:
 
-        - `head_form` none: the network's own for its lookahead (`default_form`: depth_first for a
-          one-step Depth-Q-Net, else concat); the network's, so a network registry supplies it;
+        - `head_form` none: the network's own for its lookahead (`Network.default_form`: depth_first
+          for a one-step Depth-Q-Net, else concat);
         - `average` none: its head form's (`DEFAULT_AVERAGE`: 0.25 for depth_first), else 0;
         - `weights` none: average when the training averages, else its head form's
           (`DEFAULT_WEIGHTS`: final for depth_first), else best.
 
         `lr` none is the one left unresolved: configs have always stored it as none (model folders
-        are matched on it), and `learning_rate` reads the network's rate (`DEFAULT_LR`), the other
-        default a network registry supplies."""
+        are matched on it), and `learning_rate` reads the network's rate (`Network.lr`)."""
         if self.head_form is None and isinstance(self.lookahead, int):
-            object.__setattr__(self, "head_form", default_form(self.model, self.lookahead))
+            object.__setattr__(self, "head_form", get_network(self.model).default_form(self.lookahead))
         if self.average is None:
             object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
         if self.weights is None:
@@ -260,7 +255,8 @@ class TrainConfig:
         g = self.bootstrap
         if isinstance(g, bool) or not isinstance(g, int | float) or not 0 <= g < 1:
             raise ConfigError(f"train.bootstrap must be in [0, 1) (0: the one-step target), got {g!r}")
-        if g and (self.model != "depth" or self.lookahead != 1 or not TRUNKS[self.trunk].frozen):
+        if g and (not get_network(self.model).bootstraps or self.lookahead != 1
+                  or not TRUNKS[self.trunk].frozen):
             raise ConfigError(
                 f"train.bootstrap {g}: a one-step Depth-Q-Net on a frozen trunk's cached features only "
                 f"(model {self.model!r}, lookahead {self.lookahead}, trunk {self.trunk!r}); use 0"
@@ -304,5 +300,5 @@ class TrainConfig:
 
     @property
     def learning_rate(self) -> float:
-        """The learning rate in use: `lr`, or the network's (`DEFAULT_LR`; see `_resolve_defaults`)."""
-        return DEFAULT_LR[self.model] if self.lr is None else float(self.lr)
+        """The learning rate in use: `lr`, or the network's own (`Network.lr`)."""
+        return get_network(self.model).lr if self.lr is None else float(self.lr)

@@ -26,7 +26,7 @@ a killed training's temporaries are removed when it resumes):
     tb/                      TensorBoard event files (a log: appended, purged of stale epochs on resume)
 
 Weights are safetensors, never pickles, each carrying the SHA-256 of its tensor bytes; reading a
-checkpoint back (`depthq.nets.checkpoint.load_qnet`, below both training and policies) checks it.
+checkpoint back (`depthq.networks.load_qnet`, below both training and policies) checks it.
 A policy needs nothing but the folder: config.json records its rate, frame size and actions.
 """
 
@@ -45,7 +45,7 @@ from safetensors import SafetensorError, safe_open
 from torch.optim.swa_utils import AveragedModel
 
 from depthq.configio import atomic_write_bytes, to_dict, write_json
-from depthq.control.action_selection import ACTIONS, RULE_OF
+from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.nets.checkpoint import (
@@ -62,8 +62,9 @@ from depthq.nets.checkpoint import (
     write_record,
     write_sidecar,
 )
-from depthq.nets.heads import QNet, build_head
+from depthq.nets.heads import QNet
 from depthq.nets.trunk import build_trunk
+from depthq.networks import build_head, get_network
 from depthq.sim.sensors import BinConfig
 from depthq.train.config import TrainConfig
 
@@ -177,7 +178,7 @@ def record_training(
         rate, bins = DEFAULT_DECISION_HZ, to_dict(BinConfig())
     else:
         rate, bins = env["world"]["decision_hz"], env["bins"]
-    policy = PolicyRecord(float(rate), (height, width), ACTIONS, RULE_OF[config.model], bins)
+    policy = PolicyRecord(float(rate), (height, width), ACTIONS, get_network(config.model).rule, bins)
     where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env)
     write_record(out, to_dict(config), config.head(), config.learning_rate, where, policy, threads)
 

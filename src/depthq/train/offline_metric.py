@@ -24,15 +24,13 @@ import torch
 
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
-from depthq.data.views import view_arrays
 from depthq.errors import ConfigError, DataError
-from depthq.nets.checkpoint import chosen_weights, dataset_record, load_qnet, weights_stem
+from depthq.nets.checkpoint import chosen_weights, dataset_record, weights_stem
 from depthq.nets.trunk import preprocess
+from depthq.networks import get_network, load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.trainer import loss_function
-
-METRICS = {"depth": "abs_diff", "coll": "cross_entropy"}
 
 
 @torch.inference_mode()
@@ -41,11 +39,11 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     (`training_data`)."""
     net, config = load_qnet(Path(checkpoint), weights=weights)
     train = config["train"]
-    kind = train["model"]
+    network = get_network(train["model"])
     train_config = from_dict(TrainConfig, train)
     lookahead = train_config.lookahead
     # scored against the LiDAR's bins whatever the training's labels: the measured depth is the truth
-    arrays = view_arrays(dataset, "val", None, kind, train_config.samples, lookahead)
+    arrays = network.samples(dataset, "val", None, train_config, labels="lidar")
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
     targets = torch.from_numpy(np.asarray(arrays["target"], np.float32))
     size = int(train["input_size"])
@@ -57,11 +55,11 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     stem = weights_stem(chosen_weights(config, weights))
     if lookahead == 1:
         loss, _ = loss_function(train_config)(outputs, targets)
-        return {"metric": METRICS[kind], "value": float(loss), "samples": len(targets), "weights": stem}
+        return {"metric": network.metric, "value": float(loss), "samples": len(targets), "weights": stem}
     one_step = loss_function(replace(train_config, lookahead=1))
     valid = torch.from_numpy(arrays["mask"])
     steps = [float(one_step(outputs[valid[:, k], k], targets[valid[:, k], k])[0]) for k in range(lookahead)]
-    return {"metric": METRICS[kind], "value": steps[0], "samples": len(targets), "weights": stem,
+    return {"metric": network.metric, "value": steps[0], "samples": len(targets), "weights": stem,
             "steps": steps}
 
 

@@ -125,7 +125,7 @@ class ImageSamples(Samples):
         super().__init__(view.arrays)
         self.frames = torch.empty((len(view), 3, size, size), dtype=torch.uint8)
         chunk = 256
-        for start in tqdm(range(0, len(view), chunk), desc=f"decode {view.kind} frames", unit="chunk",
+        for start in tqdm(range(0, len(view), chunk), desc="decode frames", unit="chunk",
                           disable=not progress):
             stop = min(start + chunk, len(view))
             self.frames[start:stop] = resize_frames(np.stack([view[i][0] for i in range(start, stop)]), size)

@@ -6,10 +6,8 @@ checkpoint every epoch.
 from __future__ import annotations
 
 import copy
-import functools
 import math
 import time
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,21 +19,20 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from depthq.data.manifest import Dataset
-from depthq.data.views import CollView, DepthView, view_arrays
+from depthq.data.views import FrameView
 from depthq.errors import ConfigError
 from depthq.nets.device import resolve_device
-from depthq.nets.heads import DepthFirstHead, Head, QNet
-from depthq.nets.losses import coll_bce_loss, depth_l1_loss, lookahead_l1_loss
+from depthq.nets.heads import Head, QNet
+from depthq.nets.losses import LossFn
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
+from depthq.networks import get_network
 from depthq.parallel import cores
 from depthq.train import folder
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
-
-LossFn = Callable[[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 
 
 class DivergedError(ConfigError):
@@ -147,13 +144,8 @@ def validate(
 
 
 def loss_function(config: TrainConfig) -> LossFn:
-    """The training loss of `config`'s network: a lookahead Depth-Q-Net's weights its steps."""
-    if config.model == "coll":
-        return coll_bce_loss
-    if config.lookahead > 1:
-        weights = torch.tensor(config.step_weights())
-        return functools.partial(lookahead_l1_loss, step_weights=weights, reduction=config.depth_loss)
-    return functools.partial(depth_l1_loss, reduction=config.depth_loss)
+    """The training loss of `config`'s network (`Network.loss_function`)."""
+    return get_network(config.model).loss_function(config)
 
 
 def with_target(batch: Batch, target_head: Head | None, gamma: float) -> Batch:
@@ -177,17 +169,13 @@ def train_step(
     precision: str = "fp32",
 ) -> float:
     """One Adadelta step on `batch` (`predict`'s `precision`); returns its loss. A non-finite loss is
-    returned without a step. A "depth_first" head fits each part to its own target
-    (docs/design.md#depth-first): its dynamics to the next bins from the true current ones, its
-    perception to the current bins (L1 over all of them, invalid as the clip)."""
-    if isinstance(model.head, DepthFirstHead):
-        head, bf16 = model.head, precision == "bf16"
-        with torch.autocast(device_type=batch.inputs.device.type, dtype=torch.bfloat16, enabled=bf16):
-            features = batch.inputs if batch.inputs.ndim == 2 else model.trunk(batch.inputs)
-            advanced, perceived = head.advance(batch.current, batch.actions), head.perceive(features)
-        loss = loss_fn(advanced.float(), batch.targets)[0] + (perceived.float() - batch.current).abs().mean()
-    else:
-        loss, _ = loss_fn(predict(model, samples, batch, precision), batch.targets)
+    returned without a step. The head says what it fits and its loss (`Head.training_outputs`,
+    `Head.training_loss`: a "depth_first" head fits each part to its own target)."""
+    head, bf16 = model.head, precision == "bf16"
+    with torch.autocast(device_type=batch.inputs.device.type, dtype=torch.bfloat16, enabled=bf16):
+        features = batch.inputs if batch.inputs.ndim == 2 else model.trunk(batch.inputs)
+        outputs = tuple(out.float() for out in head.training_outputs(features, batch.actions, batch.current))
+    loss = head.training_loss(outputs, batch.targets, batch.current, loss_fn)
     value = loss.item()
     if math.isfinite(value):
         optimizer.zero_grad(set_to_none=True)
@@ -200,32 +188,30 @@ def _samples(
     config: TrainConfig, dataset: Dataset, progress: bool, device: torch.device
 ) -> tuple[Samples, Samples]:
     """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
-    data = config.samples
+    network = get_network(config.model)
+    arrays = {split: network.samples(dataset, split, n, config)
+              for split, n in (("train", config.runs), ("val", None))}
+    _check_labels(config, arrays["train"]["target"])
     if TRUNKS[config.trunk].frozen:
-        arrays = {split: view_arrays(dataset, split, n, config.model, data, config.lookahead, config.labels)
-                  for split, n in (("train", config.runs), ("val", None))}
-        _check_labels(config, arrays["train"]["target"])
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
         mirrored = (load_features(dataset, config.trunk, config.input_size, progress, device, mirrored=True)
                     if config.mirror else None)
         following = config.bootstrap > 0  # validation is never mirrored: the frames as recorded
         return (FeatureSamples(arrays["train"], table, "train", following, mirrored),
                 FeatureSamples(arrays["val"], table, "val", following))
-    view = DepthView if config.model == "depth" else CollView
-    train_view = view(dataset, "train", config.runs, data, lookahead=config.lookahead, labels=config.labels)
-    _check_labels(config, train_view.arrays["target"])
     if progress:
         tqdm.write(f"trunk {config.trunk!r} is trained with the head, on images")
-    val_view = view(dataset, "val", None, data, lookahead=config.lookahead, labels=config.labels)
-    return (ImageSamples(train_view, config.input_size, progress),
-            ImageSamples(val_view, config.input_size, progress))
+    return (ImageSamples(FrameView(dataset, "train", arrays["train"]), config.input_size, progress),
+            ImageSamples(FrameView(dataset, "val", arrays["val"]), config.input_size, progress))
 
 
 def _check_labels(config: TrainConfig, targets: np.ndarray) -> None:
-    if config.model == "coll" and not targets.any():
+    """Collision targets with no collision teach nothing."""
+    network = get_network(config.model)
+    if network.view == "collision" and not targets.any():
         raise ConfigError(
-            f"Coll-Q-Net needs collisions, but the selected training runs of {config.data} "
-            f"(runs={config.runs or 'all'}) hold none (no run ended in a bump); "
+            f"{network.title} needs collisions, but the selected training runs of "
+            f"{config.data} (runs={config.runs or 'all'}) hold none (no run ended in a bump); "
             "train --model depth or use more runs"
         )
 

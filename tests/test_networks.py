@@ -1,0 +1,138 @@
+"""A network is one registered class (`depthq.networks`): a toy third one, defined here in a few lines,
+trains, drives, is measured offline, drawn and exported without any other module knowing of it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from depthq.control.action_selection import ACTIONS
+from depthq.control.heuristic import DepthHeuristic
+from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError
+from depthq.evaluate.figures import plot_fig4
+from depthq.evaluate.online import drive, parse_canyon_set
+from depthq.evaluate.video import write_video
+from depthq.nets.heads import CollHead
+from depthq.nets.losses import DEPTH_CLIP
+from depthq.networks import Network, ValuePlot, get_network, network_names, register_network, registry
+from depthq.policies.registry import make_policy
+from depthq.scripts.train import add_arguments
+from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.train.config import TrainConfig
+from depthq.train.offline_metric import offline_metric
+from depthq.train.trainer import train
+
+
+class Clearance(Network):
+    """A toy network: the clearance one step later (the nearest depth bin at t+1, from the data's bins
+    view), one number per action, mean squared error, the highest wins."""
+
+    name, title, label, colour, lr = "clearance", "Clearance-Net", "CLR", "tab:green", 0.1
+    view, metric, metric_title, loss_title = "bins", "mse", "mse", "squared error (m²)"
+    rule, rule_text = "highest_clearance", "the action whose predicted clearance is highest"
+    maximise, tie_tol, decisive, onnx_output = True, 1e-5, 0.01, "clearance"
+    plot = ValuePlot("bars", "clearance at t+1 (m)", (0.0, 2.2))
+
+    def build_head(self, config):
+        return CollHead(config)  # one number per (frame, action)
+
+    def samples(self, dataset, split, n_runs, config, labels=None):
+        arrays = super().samples(dataset, split, n_runs, config, labels)
+        bins = arrays["target"]  # (S, 26), NaN where no reading
+        return {**arrays, "target": np.where(np.isfinite(bins), bins, DEPTH_CLIP).min(axis=1)}
+
+    def loss_function(self, config):
+        def mse(pred, target):
+            per_sample = (pred - target) ** 2
+            return per_sample.mean(), per_sample
+
+        return mse
+
+
+@pytest.fixture
+def clearance(monkeypatch: pytest.MonkeyPatch) -> Network:
+    """`Clearance`, registered for one test."""
+    monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))  # unregistered after the test
+    register_network(Clearance)
+    return get_network("clearance")
+
+
+def test_the_builtin_networks_are_registered_in_the_papers_order() -> None:
+    assert network_names()[:2] == ("depth", "coll")
+    assert get_network("coll").title == "Coll-Q-Net" and get_network("depth").maximise
+    with pytest.raises(ConfigError, match="unknown network 'value'; one of"):
+        get_network("value")
+    with pytest.raises(ConfigError, match=r"train\.model must be one of"):
+        TrainConfig(model="value", data="data")
+
+
+def test_a_packages_network_is_found_by_its_entry_point(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A package declares its network as an entry point (what every process, a worker too, finds)."""
+    monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))
+    monkeypatch.setattr(registry, "_installed", False)
+    point = EntryPoint("clearance", f"{__name__}:Clearance", registry.ENTRY_POINTS)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [point] if group == point.group else [])
+    assert isinstance(get_network("clearance"), Clearance)
+    assert network_names()[-1] == "clearance"
+    monkeypatch.setattr(registry, "_installed", False)
+    broken = EntryPoint("broken", "no_such_module:Net", registry.ENTRY_POINTS)
+    monkeypatch.setattr(registry, "entry_points", lambda group: [broken])
+    with pytest.raises(ConfigError, match=r"network 'broken' .* does not load"):
+        get_network("broken")
+
+
+@pytest.mark.slow
+def test_a_third_network_trains_drives_and_exports(
+    clearance: Network, small_dataset: Path, tmp_path: Path
+) -> None:
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert "--model {depth,coll,clearance}" in parser.format_help()  # the flag lists the registry
+
+    fast = {"epochs": 2, "train_batches": 4, "val_batches": 1, "batch_size": 16}
+    folder = train(TrainConfig(model="clearance", data=str(small_dataset), **fast), tmp_path / "clr",
+                   progress=False)
+    record = json.loads((folder / "config.json").read_text())
+    assert record["head"]["kind"] == "clearance" and record["policy"]["rule"] == "highest_clearance"
+    losses = [float(line.split(",")[2]) for line in (folder / "metrics.csv").read_text().splitlines()[1:]]
+    assert len(losses) == 2 and all(np.isfinite(losses))
+    metric = offline_metric(folder, Dataset.open(small_dataset))
+    assert metric["metric"] == "mse" and metric["value"] >= 0 and metric["samples"] > 0
+
+    # Driven in this process (a worker process would not know the network: `depthq.networks.registry`).
+    policy = make_policy(str(folder), threads=1)
+    assert policy.network is clearance and policy.name.startswith("CLR:")
+    env = CanyonEnv(EnvConfig(time_limit_s=3.0))
+    try:
+        canyon = parse_canyon_set("val:1000")[0]
+        run = drive(policy, env, DepthHeuristic(), canyon, seed=0, keep_every=3, video=True)
+        obs, _ = env.reset(seed=0, options={"canyon": canyon})
+        action = policy.act(obs)
+    finally:
+        env.close()
+    assert run["steps"] > 0 and set(np.asarray(run["actions"]).tolist()) <= set(ACTIONS)
+    values = policy.last_values
+    assert values.shape == (3,) and action == ACTIONS[int(np.argmax(values))]  # the highest wins
+    described = policy.describe()
+    write_video(run["video"], run, described, tmp_path / "video.mp4", fps=5.0)
+    plot_fig4(run["snapshots"], run, described, tmp_path / "fig4.png")
+    assert (tmp_path / "video.mp4").stat().st_size > 0 and (tmp_path / "fig4.png").stat().st_size > 0
+
+    onnx = pytest.importorskip("onnx")
+    from depthq.deploy.onnx_export import export_onnx
+    from depthq.policies.onnx import OnnxPolicy
+
+    path = export_onnx(folder, tmp_path / "onnx")
+    model = onnx.load(path)
+    meta = {p.key: p.value for p in model.metadata_props}
+    assert meta["depthq.kind"] == "clearance" and meta["depthq.selection"] == clearance.rule_text
+    assert [o.name for o in model.graph.output] == ["clearance"]
+    exported = OnnxPolicy(path, threads=1)
+    np.testing.assert_allclose(exported.values(obs["image"]), values, atol=1e-4)
+    assert exported.act(obs) == action
