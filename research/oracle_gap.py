@@ -44,7 +44,7 @@ from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.networks import load_qnet
+from depthq.networks import get_network, load_qnet
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (
@@ -337,7 +337,7 @@ def _short(name: str) -> str:
     rest = "_".join(p for p in rest.split("_") if not (p[:1] in "ns" and p[1:].isdigit()))
     head = "depth-first" if _depth_first(name) else ""
     rest = rest.replace("head_form", "").replace("_", " ")
-    return " ".join(filter(None, ("DQN" if net == "depth" else "CQN", head, rest)))
+    return " ".join(filter(None, (get_network(net).label, head, rest)))
 
 
 def plot_where(out: Path, path: Path) -> None:

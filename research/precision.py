@@ -24,7 +24,7 @@ import torch
 
 from depthq.data.manifest import Dataset
 from depthq.nets.checkpoint import dataset_record, read_config
-from depthq.nets.heads import probability
+from depthq.networks import get_network
 from depthq.policies.qnet import QNetPolicy
 
 FRAMES = 1000
@@ -46,7 +46,7 @@ def decide(policy: QNetPolicy, candidates: torch.Tensor, frame: np.ndarray, bf16
     when `bf16`."""
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
         out = policy.net.candidate_outputs(policy.features([frame]), candidates)[0].float()
-    return policy.choose((probability(out) if policy.kind == "coll" else out).numpy())
+    return policy.choose(get_network(policy.kind).output(out).numpy())
 
 
 def measure(checkpoint: Path, frames: int = FRAMES) -> dict[str, Any]:

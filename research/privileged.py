@@ -36,7 +36,7 @@ from depthq.data.views import run_then_frame, view_arrays
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
 from depthq.evaluate.oracle import env_config
-from depthq.nets.heads import HeadConfig, probability
+from depthq.nets.heads import HeadConfig
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.networks import build_head, get_network
@@ -136,7 +136,7 @@ def drive(
                 else:
                     x = torch.from_numpy(lidar_input(obs["bins"], obs["scan"], kind)).repeat(len(ACTIONS), 1)
                 out = head(x, actions)
-                values = (out if net == "depth" else probability(out)).numpy()
+                values = get_network(net).output(out).numpy()
                 action = get_network(net).choose(values, np.array(ACTIONS))
                 obs, _, terminated, truncated, info = env.step([action])
                 done = terminated or truncated
@@ -187,7 +187,7 @@ def table(folders: list[Path]) -> str:
              "|---|---|---|---|---|---|---|"]
     for folder in folders:
         for r in read_json(folder / "results.json").values():
-            net = "Depth-Q-Net" if r["net"] == "depth" else "Coll-Q-Net"
+            net = get_network(r["net"]).title
             lines.append(f"| {net} | {INPUT_NAMES[r['input']]} | {r['runs']} | {r['seed']} | "
                          f"{r['progress_mean']:.2f} | {r['reached_end']} | {r['collisions']} |")
     return "\n".join(lines)
