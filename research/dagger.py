@@ -42,7 +42,7 @@ import numpy as np
 from tqdm import tqdm
 
 from depthq.configio import from_dict
-from depthq.data.labels import usable
+from depthq.data.labels import SampleConfig, usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
 from depthq.data.subsets import select_runs
@@ -229,7 +229,9 @@ def stats(out: Path, setup: Setup) -> str:
              "commands at the clip | frames with a bin < 0.5 m |", "|---|---|---|---|---|---|---|---|"]
     for seed in setup.seeds:
         dataset = Dataset.open(out / f"s{seed}" / f"round{setup.rounds}" / "data")
-        clip, min_frames = (float(dataset.config["data"][k]) for k in ("action_clip", "min_frames"))
+        # the samples' clip (a training setting; manifests before #48 recorded it too) and which runs count
+        clip = float(dataset.config["data"].get("action_clip", SampleConfig().action_clip))
+        min_frames = int(dataset.config["data"]["min_frames"])
         firsts = [0] + [r["first"] for r in dataset.config["rounds"]]
         for r, (lo, hi) in enumerate(zip(firsts, [*firsts[1:], float("inf")], strict=True)):
             entries = [e for e in dataset.entries("train") if lo <= e.index < hi and usable(e, min_frames)]

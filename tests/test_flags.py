@@ -237,6 +237,10 @@ def test_sweep_settings_parse_as_the_train_flags_do(
 
     assert parse_setting("lr=none,0.1") == ("lr", (None, 0.1))
     assert parse_setting("dropout=0,0.5") == ("dropout", (0.0, 0.5))
+    # an int for a setting that may be unset names its folders as it always did (average0, not average0.0)
+    assert parse_setting("average=0,0.25") == ("average", (0, 0.25))
+    assert widened(get_preset("smoke"), grid=(parse_setting("average=0"),)).models()[0].name == \
+        "depth_n3_s0_average0"
     sweep = widened(get_preset("smoke"), grid=(parse_setting("lr=none"),))
     args = build_parser("train").parse_args(["train", "--model", "depth", "--data", "d", "--out", "o",
                                              "--lr", "none"])

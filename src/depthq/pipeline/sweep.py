@@ -32,6 +32,7 @@ Settings = tuple[tuple[str, Any], ...]  # (field path, value) pairs: a partial c
 # The grid's own axes, or fixed by the sweep's setup: not for --set.
 NOT_IN_GRID = ("model", "data", "runs", "seed")
 _SAFE = re.compile(r"^[A-Za-z0-9._+-]+$")  # a value that can be part of a folder name
+_INT = re.compile(r"^-?[0-9]+$")
 
 
 @dataclass(frozen=True)
@@ -258,6 +259,11 @@ def parse_setting(text: str) -> tuple[str, tuple[Any, ...]]:
     tupled = typing.get_origin(flags[key].hint) is tuple  # its items joined by '+' here, by ',' in a flag
     for item in raw.split(","):
         value = parse_value(flags[key], item.replace("+", ",") if tupled else item, f"--set {key}")
+        # An int for a setting that may be unset stays an int, as folders were always named: `--set
+        # average=0` is …_average0, not …_average0.0.
+        unset_default = not isinstance(flags[key].default, float)
+        if isinstance(value, float) and unset_default and _INT.match(item.strip()):
+            value = int(item)
         if not _SAFE.match(setting_text(value)):
             raise ConfigError(f"--set {key}: value {item!r} cannot name a model folder")
         values.append(value)
