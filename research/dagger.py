@@ -42,9 +42,9 @@ import numpy as np
 from tqdm import tqdm
 
 from depthq.configio import from_dict
-from depthq.data.labels import SampleConfig, usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
+from depthq.data.samples import SampleConfig, usable
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate

@@ -16,8 +16,8 @@ from safetensors.torch import load_file
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, read_config

@@ -19,8 +19,8 @@ import research
 from depthq import experiments
 from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
-from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import SampleConfig
 from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.pipeline.presets import get_preset

@@ -27,10 +27,10 @@ from depthq.configio import check_seed, to_dict
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.control.policy import Policy
 from depthq.data import StorageConfig
-from depthq.data.labels import usable as is_usable
 from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
+from depthq.data.samples import usable as is_usable
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import PAPER, CanyonId

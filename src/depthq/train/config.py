@@ -9,7 +9,7 @@ from typing import Literal
 
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
-from depthq.data.labels import SampleConfig
+from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.flags import CHOICES
 from depthq.nets.checkpoint import WEIGHTS
