@@ -273,22 +273,22 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
         np.testing.assert_array_equal(image, runs[run_id].images[t])
     coll = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "collision", CONFIG))
     assert len(coll) == 19 + 23 + 20
-    labels = coll.arrays["target"]
+    targets = coll.arrays["target"]
     offsets = coll.arrays["run_offsets"]
-    assert labels[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
-    assert labels[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
+    assert targets[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
+    assert targets[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
     val = FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
     assert set(val.arrays["run_id"].tolist()) == {0} and len(val) == 16
-    # Collision labels on bumps only: the time-limited run keeps all its samples, labelled 0.
+    # Collision targets on bumps only: the time-limited run keeps all its samples, each 0.
     bumps_only = replace(CONFIG, every_run_end=False)
     assert len(view_arrays(dataset, "train", 3, "bins", bumps_only)["frame_id"]) == 14 + 18 + 20
     coll = view_arrays(dataset, "train", 3, "collision", bumps_only)
     assert coll["target"][coll["run_offsets"][2] :].sum() == 0
 
 
-def test_action_labels_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
-    """The stored command (up to ±2.84 rad/s) is clipped to ±1 as a label; with action_lag = 1,
-    frame t is labelled with the command computed from frame t − 1 and frame 0 is no sample."""
+def test_actions_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
+    """The stored command (up to ±2.84 rad/s) is clipped to ±1 as an action; with action_lag = 1,
+    frame t is paired with the command computed from frame t − 1 and frame 0 is no sample."""
     dataset = Dataset.create(tmp_path / "d", {"collect": {}}, seed=0)
     run = make_run("train", 0, 22)
     fast = Run(**{**{f: getattr(run, f) for f in ("meta", "images", "scans", "bins", "poses", "times")},

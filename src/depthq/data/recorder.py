@@ -102,9 +102,9 @@ def collect_run(
     """Drive one OU run until a bump, a contact, the time limit or `max_steps`.
 
     Every observation is a frame but the first `skip_frames`; a stored action is the yaw rate the
-    robot was commanded after its frame (unclipped: labels clip it, `DataConfig.action_clip`).
+    robot was commanded after its frame (unclipped: samples clip it, `DataConfig.action_clip`).
     With a `driver` the command is its yaw rate plus the OU command (a DAgger round: the states the
-    policy drives itself into, its actions as varied as the exploration's); the labels are the same.
+    policy drives itself into, its actions as varied as the exploration's); the targets are the same.
     """
     env_seed, policy_seed = run_seeds(seed, split, index)
     canyon = CanyonId(split, index, config.env.world.family)

@@ -135,7 +135,7 @@ def format_stats(stats: dict[str, Any]) -> str:
         + ", ".join(f"{collected[s]} {s} runs ({usable_counts[s]} usable)" for s in SPLITS)
         + f"; {stats['frames']} frames, {stats['kb_per_frame']:.1f} KB per frame stored",
         f"usable = at least {cfg['min_frames']} frames; "
-        f"collision labels on the last {cfg['horizon']} samples of "
+        f"collision targets on the last {cfg['horizon']} samples of "
         + ("every run" if cfg.get("every_run_end") else "runs that ended in a bump")
         + "; paper = the paper's Table II",
         "",
