@@ -1,8 +1,8 @@
-"""DAgger with a self-supervised label (docs/oracle_gap.md#dagger): rounds of collection driven by the
-learned Depth-Q-Net (the exploration's OU command added to its action), each run labelled as every run
-is, by the depth that follows (no collision needed), aggregated with the exploration runs at the
+"""DAgger with a self-supervised target (docs/oracle_gap.md#dagger): rounds of collection driven by the
+learned Depth-Q-Net (the exploration's OU command added to its action), each run's targets, as every
+run's, the depth that follows (no collision needed), aggregated with the exploration runs at the
 baseline's number of training runs; the other network is offered the same aggregate. With `--net
-coll` Coll-Q-Net drives its own rounds (its label needs the collisions its runs end in).
+coll` Coll-Q-Net drives its own rounds (its target needs the collisions its runs end in).
 
     python -m research.dagger run OUT --base DATA [--net depth] [--seeds 0,1] [--rounds 2]
     python -m research.dagger table OUT [--net depth] [--seeds 0,1] [--baseline SWEEP]
@@ -42,9 +42,9 @@ import numpy as np
 from tqdm import tqdm
 
 from depthq.configio import from_dict
-from depthq.data.labels import SampleConfig, usable
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
+from depthq.data.samples import SampleConfig, usable
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluate
@@ -224,7 +224,7 @@ NEAR = 0.5  # m: a frame whose nearest depth bin is closer than this is "near an
 def stats(out: Path, setup: Setup) -> str:
     """Markdown: what each round adds to the last round's dataset, per seed, counting the usable runs
     (those trained on): runs, frames per run, runs ending in a collision, the mean |command| (as the
-    labels clip it), the share of commands at that clip, and the share of frames near an obstacle."""
+    samples clip it), the share of commands at that clip, and the share of frames near an obstacle."""
     lines = ["| seed | runs of | usable runs | frames per run | end in a collision | mean abs. command | "
              "commands at the clip | frames with a bin < 0.5 m |", "|---|---|---|---|---|---|---|---|"]
     for seed in setup.seeds:

@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from depthq.control.heuristic import DepthHeuristic
-from depthq.data.labels import MIN_FRAMES
 from depthq.data.recorder import CollectConfig, collect_run, exploration_env
+from depthq.data.samples import MIN_FRAMES
 from depthq.evaluate.metrics import summarize
 from depthq.evaluate.online import drive, parse_canyon_set
 from depthq.parallel import worker_context

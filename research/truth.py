@@ -38,7 +38,7 @@ def next_bins(
 ) -> np.ndarray:
     """(S, len(ACTIONS), bins): from the pose of each sample (run, frame) of `split`, the true bins one
     decision later with each candidate action. `cache` keeps them per frame, so runs over other
-    samples of the same dataset (a checkpoint of another label horizon) reuse what they share."""
+    samples of the same dataset (a checkpoint of another target horizon) reuse what they share."""
     cache = {} if cache is None else cache
     keys = [(str(dataset.root), split, int(r), int(t)) for r, t in zip(run_ids, frame_ids, strict=True)]
     missing = [key for key in dict.fromkeys(keys) if key not in cache]

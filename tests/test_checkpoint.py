@@ -16,8 +16,8 @@ from safetensors.torch import load_file
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, read_config
@@ -169,7 +169,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert read_json(renamed / "config.json")["train"]["weights"] == "final"
 
     # Version 3 before #33 nested TrainConfig's sample settings in `train.samples`: read there, so a
-    # sweep reuses the folder, and a training that labels otherwise is told which setting differs.
+    # sweep reuses the folder, and a training whose samples differ is told which setting differs.
     flat = tmp_path / "v3-flat"
     shutil.copytree(out, flat)
     flat_train = {k: v for k, v in record["train"].items() if k != "samples"} | record["train"]["samples"]

@@ -50,7 +50,7 @@ def test_runs_are_real_exploration_runs(reference):
         assert sum(e.n_frames >= 20 for e in entries if e.split == split) == wanted
     run = reference.read_run(next(e for e in entries if e.n_frames >= 20))
     assert run.images.shape[1:] == (308, 410, 3)
-    # The command is stored unclipped, up to the robot's limit; labels clip it later.
+    # The command is stored unclipped, up to the robot's limit; samples clip it later.
     assert np.isnan(run.actions[-1]) and np.all(np.abs(run.actions[:-1]) <= TURTLEBOT3_MAX_YAW_RATE)
     assert run.meta.end_reason in ("bump", "contact", "time_limit", "step_limit")
     assert np.all(np.diff(run.times) > 0)

@@ -1,4 +1,4 @@
-"""The storage layer on synthetic runs written to disk and read back: labels, subsets, files, views."""
+"""The storage layer on synthetic runs written to disk and read back: targets, subsets, files, views."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ from torch.utils.data import DataLoader
 from depthq.cli import main
 from depthq.data import DataConfig
 from depthq.data import runfile as runfile_module
-from depthq.data.labels import coll_sample_indices, collision_labels, depth_sample_indices, usable
 from depthq.data.manifest import MANIFEST, Dataset
 from depthq.data.run import Run, RunMeta
 from depthq.data.runfile import JPEG_MAX_MEAN_ABS_ERROR, RunReader, read_frame, read_run, write_run
+from depthq.data.samples import coll_sample_indices, collision_targets, depth_sample_indices, usable
 from depthq.data.stats import dataset_stats
 from depthq.data.subsets import select_runs
 from depthq.data.views import FrameView, run_then_frame, view_arrays
@@ -79,21 +79,21 @@ def make_dataset(root: Path, lengths: list[int], val_lengths: tuple[int, ...] = 
     return dataset
 
 
-# --- labels -------------------------------------------------------------------------------------
+# --- targets ------------------------------------------------------------------------------------
 
 
-def test_labels_of_a_collision_run() -> None:
-    labels = collision_labels(25, True, horizon=5)
-    assert labels.dtype == np.float32 and labels.shape == (24,)
-    assert labels[:19].sum() == 0 and (labels[19:] == 1).all()
+def test_targets_of_a_collision_run() -> None:
+    targets = collision_targets(25, True, horizon=5)
+    assert targets.dtype == np.float32 and targets.shape == (24,)
+    assert targets[:19].sum() == 0 and (targets[19:] == 1).all()
     np.testing.assert_array_equal(coll_sample_indices(25), np.arange(24))
     np.testing.assert_array_equal(depth_sample_indices(25, True, horizon=5), np.arange(19))
 
 
-def test_labels_of_a_run_without_collision() -> None:
-    assert collision_labels(25, False, horizon=5).sum() == 0
+def test_targets_of_a_run_without_collision() -> None:
+    assert collision_targets(25, False, horizon=5).sum() == 0
     np.testing.assert_array_equal(depth_sample_indices(25, False, horizon=5), np.arange(24))
-    assert collision_labels(4, True, horizon=5).tolist() == [1, 1, 1]
+    assert collision_targets(4, True, horizon=5).tolist() == [1, 1, 1]
     assert len(depth_sample_indices(4, True, horizon=5)) == 0
 
 
@@ -273,22 +273,22 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
         np.testing.assert_array_equal(image, runs[run_id].images[t])
     coll = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "collision", CONFIG))
     assert len(coll) == 19 + 23 + 20
-    labels = coll.arrays["target"]
+    targets = coll.arrays["target"]
     offsets = coll.arrays["run_offsets"]
-    assert labels[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
-    assert labels[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
+    assert targets[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
+    assert targets[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
     val = FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
     assert set(val.arrays["run_id"].tolist()) == {0} and len(val) == 16
-    # Collision labels on bumps only: the time-limited run keeps all its samples, labelled 0.
+    # Collision targets on bumps only: the time-limited run keeps all its samples, each 0.
     bumps_only = replace(CONFIG, every_run_end=False)
     assert len(view_arrays(dataset, "train", 3, "bins", bumps_only)["frame_id"]) == 14 + 18 + 20
     coll = view_arrays(dataset, "train", 3, "collision", bumps_only)
     assert coll["target"][coll["run_offsets"][2] :].sum() == 0
 
 
-def test_action_labels_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
-    """The stored command (up to ±2.84 rad/s) is clipped to ±1 as a label; with action_lag = 1,
-    frame t is labelled with the command computed from frame t − 1 and frame 0 is no sample."""
+def test_actions_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
+    """The stored command (up to ±2.84 rad/s) is clipped to ±1 as an action; with action_lag = 1,
+    frame t is paired with the command computed from frame t − 1 and frame 0 is no sample."""
     dataset = Dataset.create(tmp_path / "d", {"collect": {}}, seed=0)
     run = make_run("train", 0, 22)
     fast = Run(**{**{f: getattr(run, f) for f in ("meta", "images", "scans", "bins", "poses", "times")},

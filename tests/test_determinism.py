@@ -1,9 +1,9 @@
 """What depthq promises identical on every machine (docs/design.md#determinism): canyons, exploration
-runs (every non-image array: LiDAR scans, bins, OU actions, poses, times, run metadata), labels and
-Table II. Golden SHA-256 digests of a small collection, committed here, catch a drift in MuJoCo, NumPy
+runs (every non-image array: LiDAR scans, bins, OU actions, poses, times, run metadata), samples' targets
+and Table II. Golden SHA-256 digests of a small collection, committed here, catch a drift in MuJoCo, NumPy
 or the project's own code on any host; frames are left out (the renderer's pixels may differ).
 
-A digest that changes on purpose (a new canyon generator, new labels) is updated here with the
+A digest that changes on purpose (a new canyon generator, new targets) is updated here with the
 change, and the docs say which results it invalidates."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from depthq.sim.canyon import CanyonId, generate_canyon
 GOLDEN = {
     "canyons": "aa9414eef44769e55379d9bcf7f8f4a45c422c51f2edc531b4d924591148fa5e",
     "runs": "58b5e4d51c84eb28ab3c9f91ac513d4728a684615c78baf698e5982738d8a8a6",
-    "labels": "654af33db476a4686cd5279b11e11f0a9e9be25a7d90786bb29ec05294ff951a",
+    "targets": "654af33db476a4686cd5279b11e11f0a9e9be25a7d90786bb29ec05294ff951a",
     # Table II record without data_config.jpeg_quality (#48: DataConfig counts, StorageConfig stores);
     # the same record with it back digests to 7e659bfb…, the golden before: no number changed.
     "table2": "7f20099fd381149a1bf74512355237308096439b892c669a537bfe270d4b7d0a",
@@ -55,7 +55,7 @@ def digests(root: Path) -> dict[str, str]:
             run = reader.run(images=False)
         meta = json.dumps(asdict(run.meta), sort_keys=True, default=int)
         runs += [meta, run.scans, run.bins, run.actions, run.poses, run.times]
-    labels = [view_arrays(dataset, split, None, kind, DataConfig())[key]
+    targets = [view_arrays(dataset, split, None, kind, DataConfig())[key]
               for split in ("train", "val") for kind in ("bins", "collision")
               for key in ("run_offsets", "frame_id", "action", "target")]
     # Table II's numbers; not the dataset's path, nor its bytes per frame (JPEG: the renderer's pixels)
@@ -64,12 +64,12 @@ def digests(root: Path) -> dict[str, str]:
     return {
         "canyons": _digest(*(a for c in canyons for a in (c.left, c.right, c.back, c.obstacles))),
         "runs": _digest(*runs),
-        "labels": _digest(*labels),
+        "targets": _digest(*targets),
         "table2": _digest(json.dumps(table2, sort_keys=True)),
     }
 
 
-def test_canyons_runs_labels_and_table_ii_are_the_golden_bytes(small_dataset: Path) -> None:
+def test_canyons_runs_targets_and_table_ii_are_the_golden_bytes(small_dataset: Path) -> None:
     found = digests(small_dataset)
     drifted = {part: digest for part, digest in found.items() if digest != GOLDEN[part]}
     assert not drifted, (

@@ -19,8 +19,8 @@ import research
 from depthq import experiments
 from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
-from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import SampleConfig
 from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.pipeline.presets import get_preset
@@ -76,7 +76,7 @@ def hard_data(small_hard_dataset: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def hard_checkpoints(hard_data: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """Two Depth-Q-Nets on `hard_data`: the default label horizon (5) and horizon 1."""
+    """Two Depth-Q-Nets on `hard_data`: the default target horizon (5) and horizon 1."""
     out = tmp_path_factory.mktemp("hard_models")
     return tuple(  # type: ignore[return-value]
         train(TrainConfig(model="depth", data=str(hard_data), samples=SampleConfig(horizon=h),

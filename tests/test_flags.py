@@ -169,7 +169,7 @@ def _train(argv: list[str]):
 def test_the_flat_train_spellings_parse_to_the_same_config() -> None:
     """TrainConfig held its sample settings itself until #33: --horizon is --samples.horizon, for one
     release, in either spelling."""
-    from depthq.data.labels import SampleConfig
+    from depthq.data.samples import SampleConfig
 
     dotted = _train(["--samples.horizon", "3", "--samples.min-frames", "30", "--no-samples.every-run-end",
                      "--samples.action-clip", "0.5", "--samples.action-lag", "1"])
@@ -297,9 +297,9 @@ def test_collect_offers_only_what_changes_the_data(capsys: pytest.CaptureFixture
     them (nor Table II's subsets), and a dataset's manifest written when it held them (before #48)
     reads without them, so the same collection resumes it."""
     from depthq.cli import main
-    from depthq.data.labels import SampleConfig
     from depthq.data.manifest import upgrade_config
     from depthq.data.recorder import CollectConfig
+    from depthq.data.samples import SampleConfig
 
     with pytest.raises(SystemExit):
         main(["collect", "--help"])
@@ -319,8 +319,8 @@ def test_no_setting_is_declared_twice() -> None:
     none of their fields is a field of the sweep (its `canyons` is the canyon set evaluate's --canyons
     takes, which EvalConfig holds as the canyons it names). HeadConfig has no default for a setting
     TrainConfig holds (a second default could disagree), and `TrainConfig.head` passes each on."""
-    from depthq.data.labels import SampleConfig
     from depthq.data.recorder import CollectConfig
+    from depthq.data.samples import SampleConfig
     from depthq.evaluate.online import EvalConfig
     from depthq.nets.heads import HeadConfig
     from depthq.pipeline.sweep import Sweep

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from depthq.cli import main
-from depthq.data.labels import usable
 from depthq.data.manifest import Dataset
 from depthq.data.runfile import JPEG_MAX_MEAN_ABS_ERROR, encode_jpeg
+from depthq.data.samples import usable
 from depthq.errors import ConfigError, DataError
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train

@@ -15,9 +15,9 @@ from safetensors.torch import load, load_file, save
 
 from depthq.cli import main
 from depthq.configio import read_json
-from depthq.data.labels import SampleConfig
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env
+from depthq.data.samples import SampleConfig
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args

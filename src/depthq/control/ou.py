@@ -18,7 +18,7 @@ class OUConfig:
     """x_t = x_{t−1} + theta·(mu − x_{t−1}) + sigma·N(0, 1) from x_0 = 0;  command a_t = scale·x_t.
 
     As in the original code (docs/design.md#exploration) the command is not clipped (stationary std
-    ≈ 0.96 rad/s, up to ≈ 3 rad/s) and the first one is already scale·N(0, 1); the stored label is
+    ≈ 0.96 rad/s, up to ≈ 3 rad/s) and the first one is already scale·N(0, 1); the stored command is
     clipped later (`DataConfig.action_clip`), the robot's own limit is `WorldConfig.max_yaw_rate`.
     """
 

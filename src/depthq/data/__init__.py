@@ -1,10 +1,10 @@
-"""Exploration data: the on-disk run format, labels, nested subsets and the views training reads.
+"""Exploration data: the on-disk run format, samples and their targets, subsets, the views training reads.
 
 Layers, each in a module of its own: `run` (one run in memory), `runfile` (one run on disk),
-`manifest` (a dataset folder), `labels` (which frames are samples and their targets), `subsets`
+`manifest` (a dataset folder), `samples` (which frames are samples and their targets), `subsets`
 (the paper's nested "first n runs"), `views` (PyTorch datasets and in-memory sample arrays),
 `stats` (Table II and the dataset check). `StorageConfig` is what a collection stores (it changes
-the data); `DataConfig` is how Table II counts a dataset's samples: a `SampleConfig` (`labels`: which
+the data); `DataConfig` is how Table II counts a dataset's samples: a `SampleConfig` (`samples`: which
 frames are samples, the setting a training holds as `TrainConfig.samples`) and the nested subsets.
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from depthq.data.labels import HORIZON, MIN_FRAMES, SampleConfig
 from depthq.data.runfile import JPEG_QUALITY
+from depthq.data.samples import HORIZON, MIN_FRAMES, SampleConfig
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
 
@@ -22,7 +22,7 @@ from depthq.errors import ConfigError
 class StorageConfig:
     """What a collection stores besides its env (`CollectConfig.data`): the runs that count towards its
     `runs` (`min_frames`) and how their frames are stored (`jpeg_quality`). Only what changes the data:
-    which frames become samples, and their labels, is a training's setting (`TrainConfig.samples`)."""
+    which frames become samples, and their targets, is a training's setting (`TrainConfig.samples`)."""
 
     # Runs shorter than this many frames are stored but do not count towards the runs collected.
     min_frames: int = MIN_FRAMES
@@ -30,7 +30,7 @@ class StorageConfig:
     jpeg_quality: int = JPEG_QUALITY
 
     def __post_init__(self) -> None:
-        low = HORIZON + 2  # every counted run keeps a depth sample under the default labels
+        low = HORIZON + 2  # every counted run keeps a depth sample under the default targets
         if isinstance(self.min_frames, bool) or not isinstance(self.min_frames, int) or self.min_frames < low:
             raise ConfigError(f"data.min_frames must be an integer >= {low}, got {self.min_frames!r}")
         if not 1 <= self.jpeg_quality <= 95:

@@ -27,10 +27,10 @@ from depthq.configio import check_seed, to_dict
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.control.policy import Policy
 from depthq.data import StorageConfig
-from depthq.data.labels import usable as is_usable
 from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
+from depthq.data.samples import usable as is_usable
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import PAPER, CanyonId
@@ -102,9 +102,9 @@ def collect_run(
     """Drive one OU run until a bump, a contact, the time limit or `max_steps`.
 
     Every observation is a frame but the first `skip_frames`; a stored action is the yaw rate the
-    robot was commanded after its frame (unclipped: labels clip it, `DataConfig.action_clip`).
+    robot was commanded after its frame (unclipped: samples clip it, `DataConfig.action_clip`).
     With a `driver` the command is its yaw rate plus the OU command (a DAgger round: the states the
-    policy drives itself into, its actions as varied as the exploration's); the labels are the same.
+    policy drives itself into, its actions as varied as the exploration's); the targets are the same.
     """
     env_seed, policy_seed = run_seeds(seed, split, index)
     canyon = CanyonId(split, index, config.env.world.family)

@@ -33,7 +33,7 @@ range_max (+inf included) read inf (no return).
 
 Camera-only recordings: with `Topics(scan="")` (`--scan-topic ''`) a recording without a LiDAR
 imports too; its frames need no scan, and its runs hold scans of all inf and bins of all NaN (no
-depth was measured). Coll-Q-Net's labels come from where runs end, so it trains on them as on any
+depth was measured). Coll-Q-Net's targets come from where runs end, so it trains on them as on any
 recording; Depth-Q-Net's NaN targets add no loss.
 """
 

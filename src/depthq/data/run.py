@@ -58,7 +58,7 @@ class RunMeta:
 
     @property
     def collision(self) -> bool:
-        """Whether the run ended by hitting something (its last H actions get collision labels)."""
+        """Whether the run ended by hitting something (its last H actions get collision targets)."""
         return self.end_reason in COLLISION_END_REASONS
 
 

@@ -10,9 +10,9 @@ import numpy as np
 
 from depthq.configio import to_dict
 from depthq.data import DataConfig
-from depthq.data.labels import coll_sample_indices, depth_sample_indices, labelled_collision, usable
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import SPLITS
+from depthq.data.samples import coll_sample_indices, depth_sample_indices, ends_in_collision, usable
 from depthq.data.subsets import usable_runs
 
 # LiDAR distance bands (m) of the camera labels' error; the last one holds the clip (2 m: nothing near).
@@ -50,7 +50,7 @@ def subset_stats(subset: str, runs: list[RunEntry], config: DataConfig) -> Subse
         samples_without_collision=sum(
             len(
                 depth_sample_indices(
-                    r.n_frames, labelled_collision(r, config.every_run_end), config.horizon, config.action_lag
+                    r.n_frames, ends_in_collision(r, config.every_run_end), config.horizon, config.action_lag
                 )
             )
             for r in runs
@@ -135,7 +135,7 @@ def format_stats(stats: dict[str, Any]) -> str:
         + ", ".join(f"{collected[s]} {s} runs ({usable_counts[s]} usable)" for s in SPLITS)
         + f"; {stats['frames']} frames, {stats['kb_per_frame']:.1f} KB per frame stored",
         f"usable = at least {cfg['min_frames']} frames; "
-        f"collision labels on the last {cfg['horizon']} samples of "
+        f"collision targets on the last {cfg['horizon']} samples of "
         + ("every run" if cfg.get("every_run_end") else "runs that ended in a bump")
         + "; paper = the paper's Table II",
         "",

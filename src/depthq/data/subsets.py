@@ -9,8 +9,8 @@ split; a view of them uses all usable ones.
 
 from __future__ import annotations
 
-from depthq.data.labels import usable
 from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.samples import usable
 from depthq.errors import ConfigError
 
 PAPER_SUBSETS = (50, 100, 200, 500, 700, 900)

@@ -1,7 +1,7 @@
 """The training views of a dataset: samples as arrays (for cached features) and as a PyTorch dataset.
 
 A view is the sample list of one split (or nested subset) for one kind of target
-(`depthq.data.labels.TARGETS`; a network picks its view: `depthq.networks`):
+(`depthq.data.samples.TARGETS`; a network picks its view: `depthq.networks`):
 
     target "bins"       (image_t, a_t, bins[t + 1])   Depth-Q-Net's; collision runs lose their last H samples
     target "collision"  (image_t, a_t, y_t)           Coll-Q-Net's; every frame with an action
@@ -9,7 +9,7 @@ A view is the sample list of one split (or nested subset) for one kind of target
 A bins view's bins (its targets and the frame's own `current` bins) are the LiDAR's, or with
 `labels="camera"` those a labeller estimated from the camera (`depthq.data.camera_labels`).
 A bins view with `lookahead` K > 1 has the same samples, each with K actions and K targets
-(a_t … a_{t+K−1}, bins[t + 1] … bins[t + K]) and a mask of the valid steps (`depthq.data.labels`).
+(a_t … a_{t+K−1}, bins[t + 1] … bins[t + K]) and a mask of the valid steps (`depthq.data.samples`).
 
 `view_arrays` gives everything but the images as NumPy arrays, samples ordered by run then frame,
 with `run_offsets` so that "a random run, then a random frame of it" (docs/design.md#sampling) can be drawn on
@@ -30,19 +30,19 @@ from torch.utils.data import Dataset as TorchDataset
 from torch.utils.data import Sampler
 
 from depthq.data.camera_labels import LABEL_SOURCES, missing_labels_message
-from depthq.data.labels import (
-    SampleConfig,
-    check_lookahead,
-    coll_sample_indices,
-    collision_labels,
-    depth_lookahead_frames,
-    depth_sample_indices,
-    labelled_collision,
-    lookahead_action_indices,
-)
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
 from depthq.data.runfile import RunReader
+from depthq.data.samples import (
+    SampleConfig,
+    check_lookahead,
+    coll_sample_indices,
+    collision_targets,
+    depth_lookahead_frames,
+    depth_sample_indices,
+    ends_in_collision,
+    lookahead_action_indices,
+)
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError
 
@@ -67,7 +67,7 @@ def view_arrays(
 
     "bins" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
     clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
-    step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.labels`).
+    step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.samples`).
     """
     check_lookahead(target, lookahead, "view lookahead")
     if labels not in LABEL_SOURCES:
@@ -80,10 +80,10 @@ def view_arrays(
     for entry in runs:
         run = dataset.read_run(entry, images=False)
         bins = run.bins if target == "collision" else _depth_bins(dataset, run, labels)
-        ended = labelled_collision(entry, config.every_run_end)
+        ended = ends_in_collision(entry, config.every_run_end)
         if target == "collision":
             t = coll_sample_indices(run.n_frames, config.action_lag)
-            y = collision_labels(run.n_frames, ended, config.horizon, config.action_lag)
+            y = collision_targets(run.n_frames, ended, config.horizon, config.action_lag)
             commands = run.actions[t - config.action_lag]
         elif lookahead > 1:
             t, frames, mask = depth_lookahead_frames(

@@ -7,7 +7,7 @@ network's rule (`Network.true_scores`, `Network.choose`):
 - `depth`, lookahead K: the noise-free depth bins 1 … K frames ahead of each candidate action held
   (K = 1: Depth-Q-Net's target), scored by the selection rule (`Selection`: the farthest nearest bin;
   for K > 1 its steps combined by the discounted mean or the minimum);
-- `coll`, lookahead K: whether holding the action bumps within K frames (Coll-Q-Net's label at
+- `coll`, lookahead K: whether holding the action bumps within K frames (Coll-Q-Net's target at
   horizon K), the lowest wins; ties go straight, as the networks' rule.
 
 `drive_oracle` drives one in canyons: what the signal can reach at a rate, whatever the network.

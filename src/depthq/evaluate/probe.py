@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from depthq.data.labels import HORIZON, MIN_FRAMES
 from depthq.data.recorder import CollectConfig, collect, collect_run, exploration_env
+from depthq.data.samples import HORIZON, MIN_FRAMES
 from depthq.data.stats import PAPER_TABLE2
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_agreement

@@ -16,7 +16,7 @@ config.json (format version 3):
                              steps a Depth-Q-Net predicts, also in `head`;
                              `feature_projection`: the size the feature is projected to, also
                              in `head`, its map stored with the head's weights; `samples`: which
-                             frames were samples, their labels: `depthq.data.labels.SampleConfig`)
+                             frames were samples, their targets: `depthq.data.samples.SampleConfig`)
     head, trunk, trunk_frozen, input_size, learning_rate
                              the network, rebuilt from these
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its

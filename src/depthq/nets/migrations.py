@@ -52,7 +52,7 @@ _ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "fo
 # Fields renamed within version 3 (old name → new), as a record written before the rename reads.
 _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 # TrainConfig's sample settings, which it held itself until #33 moved them into `samples`
-# (`depthq.data.labels.SampleConfig`).
+# (`depthq.data.samples.SampleConfig`).
 _SAMPLE_SETTINGS = ("horizon", "min_frames", "every_run_end", "action_clip", "action_lag")
 
 # TrainConfig settings by their old names (old → today's path): `select` became `weights` (#33), the

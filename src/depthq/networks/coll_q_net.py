@@ -1,5 +1,5 @@
 """Coll-Q-Net (docs/design.md#heads): predicts, for each candidate action, the probability of a
-collision within the label's horizon, and acts on the least likely (docs/design.md#action-selection)."""
+collision within the target's horizon, and acts on the least likely (docs/design.md#action-selection)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ class CollQNet(Network):
     lr = 0.1
     view = "collision"
     label_sources = ("lidar",)  # it learns from the bump, not from depth bins
-    # Depth-Q-Net's settings: it looks ahead through its label's horizon, with the paper's head.
+    # Depth-Q-Net's settings: it looks ahead through its target's horizon, with the paper's head.
     # Depth-Q-Net's settings (its lookahead, head form, bootstrap, depth loss, labels' source, bins'
     # initial bias): a sweep variant that sets them trains each Coll-Q-Net once, under its own name.
     unused_settings = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",

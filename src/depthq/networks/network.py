@@ -49,7 +49,7 @@ class Network:
     label: ClassVar[str]  # the report's short name, e.g. "DQN"
     colour: ClassVar[str]  # the report's line colour (matplotlib)
     lr: ClassVar[float]  # the learning rate `TrainConfig.lr` none means
-    view: ClassVar[str]  # the data view its samples come from (`depthq.data.labels.TARGETS`)
+    view: ClassVar[str]  # the data view its samples come from (`depthq.data.samples.TARGETS`)
     label_sources: ClassVar[tuple[str, ...]] = LABEL_SOURCES  # `TrainConfig.labels` it can learn from
     looks_ahead: ClassVar[bool] = False  # whether it predicts `TrainConfig.lookahead` > 1 steps
     bootstraps: ClassVar[bool] = False  # whether it takes a bootstrapped target (`TrainConfig.bootstrap`)

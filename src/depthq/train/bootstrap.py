@@ -1,5 +1,5 @@
 """The bootstrapped Depth-Q-Net target (docs/design.md#bootstrap): the nearest depth along the greedy
-policy's future, learnt from the next frame's bins alone (no collision label, no bump).
+policy's future, learnt from the next frame's bins alone (no collision target, no bump).
 
 Per bin, target(s_t, a_t) = (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), where d_{t+1} is the next
 frame's bins (the paper's one-step target), Q̄ the previous epoch's network and a* its greedy action at

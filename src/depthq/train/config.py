@@ -9,7 +9,7 @@ from typing import Literal
 
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
-from depthq.data.labels import SampleConfig
+from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.flags import CHOICES
 from depthq.nets.checkpoint import WEIGHTS
@@ -107,8 +107,8 @@ class TrainConfig:
     depth_loss: DepthLoss = "original"
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
     # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's
-    # collision-label window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
-    # separate settings (a lookahead of 3 with the original's labels keeps horizon 5). Coll-Q-Net: 1.
+    # collision-target window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
+    # separate settings (a lookahead of 3 with the original's targets keeps horizon 5). Coll-Q-Net: 1.
     lookahead: int = 1
     # Weight of lookahead step k in the loss: lookahead_discount ** (k − 1). 1 weighs every step alike
     # (each is a measured frame, and the selection rule's minimum over the steps needs them all).
@@ -141,9 +141,9 @@ class TrainConfig:
     mirror: bool = field(default=False, metadata=OMIT_DEFAULT)
     # Depth-Q-Net's bins, its targets and a depth_first head's current bins: the LiDAR's ("lidar") or
     # those a labeller estimated from the camera ("camera", written by `depthq label`;
-    # docs/design.md#camera-labels). Coll-Q-Net's label is the bump: "lidar" only.
+    # docs/design.md#camera-labels). Coll-Q-Net's target is the bump: "lidar" only.
     labels: LabelSource = "lidar"
-    # Which frames of the dataset's runs are samples, and their labels (docs/design.md#labels).
+    # Which frames of the dataset's runs are samples, and their targets (docs/design.md#labels).
     samples: SampleConfig = field(default_factory=SampleConfig)
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
     # validation loss), final (after the last epoch, as the original evaluated them) or average (the

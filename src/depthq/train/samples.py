@@ -74,7 +74,7 @@ class FeatureSamples(Samples):
 
     With a `mirrored` table (the features of the frames flipped left to right), each drawn sample is
     taken mirrored with probability 1/2 (docs/design.md#mirror): its mirrored features, its action
-    negated, its depth bins reversed (left is right); a collision label stays as it is.
+    negated, its depth bins reversed (left is right); a collision target stays as it is.
     """
 
     def __init__(

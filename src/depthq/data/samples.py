@@ -1,14 +1,14 @@
-"""Which frames of a run are training samples, and their labels (docs/design.md#labels). Pure NumPy.
+"""Which frames of a run are training samples, and their targets (docs/design.md#labels). Pure NumPy.
 
 Frames 0..N-2 have an action, so they are the samples; frame N-1 is where the run ended. The
-last `horizon` samples of a run are labelled 1 (Coll-Q-Net's target) if the run's end counts as a
-collision: every run's end in the original (its clean-up script labelled them all), or only a
+last `horizon` samples of a run have target 1 (Coll-Q-Net's) if the run's end counts as a
+collision: every run's end in the original (its clean-up script marked them all), or only a
 bump's (`every_run_end=False`). Depth-Q-Net's target for sample t is the next frame's bins,
 d_{t+1} = bins[t + 1], and it drops those same last `horizon` samples.
 
-`action_lag` = 1 labels frame t with the command computed from frame t−1 (what the original
+`action_lag` = 1 pairs frame t with the command computed from frame t−1 (what the original
 recorder most likely stored: recorder and controller were separate processes); frame 0 then has
-no label and is not a sample.
+no action and is not a sample.
 
 A Depth-Q-Net that looks `lookahead` = K steps ahead (docs/design.md#lookahead) keeps the one-step
 net's samples and extends each target to the frames t+1 … t+K, with the K commands actually sent
@@ -39,21 +39,21 @@ TARGETS = ("bins", "collision")
 
 @dataclass(frozen=True)
 class SampleConfig:
-    """Which frames of a dataset's runs are samples, and their labels (`depthq.data.labels`).
+    """Which frames of a dataset's runs are samples, and their targets (`depthq.data.samples`).
 
-    The defaults are the original's: collision labels on the last `horizon` samples of every run
-    (`every_run_end`), and the stored command clipped to ±`action_clip` as the action label.
+    The defaults are the original's: collision targets on the last `horizon` samples of every run
+    (`every_run_end`), and the stored command clipped to ±`action_clip` as the action.
     """
 
-    # Coll-Q-Net's collision label: a bump within this many frames (docs/design.md#labels).
+    # Coll-Q-Net's collision target: a bump within this many frames (docs/design.md#labels).
     horizon: int = HORIZON
     # Runs shorter than this many frames are not used (docs/design.md#labels).
     min_frames: int = MIN_FRAMES
-    # Every run's end is labelled a collision, as the original's labels had it; false: only a bump.
+    # Every run's end counts as a collision, as the original's targets had it; false: only a bump.
     every_run_end: bool = True
     # Recorded commands clipped to ±this (rad/s) before they become actions.
     action_clip: float = 1.0
-    # 1: label frame t with the command of frame t-1 (the original recorder, likely).
+    # 1: pair frame t with the command of frame t-1 (the original recorder, likely).
     action_lag: int = 0
 
     def __post_init__(self) -> None:
@@ -73,14 +73,14 @@ class SampleConfig:
 
 def check_lookahead(target: str, lookahead: object, what: str = "lookahead") -> None:
     """The lookahead of samples of `target` (docs/design.md#lookahead): an integer >= 1, and 1 for a
-    collision target, which looks ahead through its label's `horizon` (else a ConfigError naming
+    collision target, which looks ahead through its target's `horizon` (else a ConfigError naming
     `what`)."""
     if target not in TARGETS:
         raise ConfigError(f"a sample's target must be one of {TARGETS}, got {target!r}")
     if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
         raise ConfigError(f"{what} must be an integer >= 1, got {lookahead!r}")
     if target == "collision" and lookahead != 1:
-        raise ConfigError(f"{what}: a collision target looks ahead through its label (horizon), "
+        raise ConfigError(f"{what}: a collision target looks ahead through its target (horizon), "
                           f"so its lookahead must be 1, got {lookahead!r}")
 
 
@@ -89,17 +89,17 @@ def usable(meta: RunMeta, min_frames: int = MIN_FRAMES) -> bool:
     return meta.n_frames >= min_frames
 
 
-def labelled_collision(meta: RunMeta, every_run_end: bool) -> bool:
-    """Whether the run's last `horizon` samples get collision labels."""
+def ends_in_collision(meta: RunMeta, every_run_end: bool) -> bool:
+    """Whether the run's last `horizon` samples get collision targets."""
     return every_run_end or meta.collision
 
 
 def coll_sample_indices(n_frames: int, action_lag: int = 0) -> np.ndarray:
-    """Coll-Q-Net's samples: every frame with an action label, action_lag..N-2."""
+    """Coll-Q-Net's samples: every frame with an action, action_lag..N-2."""
     return np.arange(min(action_lag, n_frames), max(n_frames - 1, 0), dtype=np.int64)
 
 
-def collision_labels(
+def collision_targets(
     n_frames: int, ended_in_collision: bool, horizon: int = HORIZON, action_lag: int = 0
 ) -> np.ndarray:
     """y_t for Coll-Q-Net's samples: 1 for the last `horizon` of them if the run ended in a collision."""
