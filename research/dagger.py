@@ -91,7 +91,7 @@ class Setup:
     @property
     def other(self) -> str:
         """The network offered the last round's data."""
-        return "coll" if self.net == "depth" else "depth"
+        return next(name for name in NAMES if name != self.net)
 
     @property
     def first(self) -> int:

@@ -55,6 +55,7 @@ from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, ranks_driving
+from depthq.train.config import TrainConfig
 from depthq.train.folder import METRICS
 from research.oracle_gap import Candidate, Setup, sweep_of
 
@@ -73,7 +74,7 @@ def candidate(epochs: int, snapshots: tuple[int, ...], net: str = "depth") -> Ca
     one epoch's weights too: a Depth-Q-Net's final ones (average=0, the depth-first default's weight
     average left out), a Coll-Q-Net's best."""
     kept = "+".join(map(str, snapshots))
-    final = ("average=0",) if net == "depth" else ()
+    final = ("average=0",) if TrainConfig(model=net, data="-").average else ()  # its default averages
     return Candidate(f"{epochs} epochs", (f"epochs={epochs}", f"snapshots={kept}", *final), net)
 
 

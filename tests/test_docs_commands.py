@@ -1,7 +1,9 @@
 """The commands of the user docs work as written: each `depthq` line of the bash blocks of Getting
 started, then of each guide and network page, runs in order in one folder at toy size (flags appended
 that shrink it: argparse takes a flag's last value), and writes what the next line reads; a long job
-(`reproduce`, `sweep`) has its flags parsed only."""
+(`reproduce`, `sweep`) has its flags parsed only. The guides that need ROS or a Ray cluster (robot.md,
+cluster.md) have every command parsed by its verb's parser (they run in tests/test_ros.py and
+tests/test_cluster.py)."""
 
 from __future__ import annotations
 
@@ -26,13 +28,15 @@ TOY = {
     "drive": ["--time-limit-s", "3"],
     "labeller": ["--steps", "2", "--batch-size", "4"],
 }
+# Guides whose commands need ROS 1 or a Ray cluster: parsed, so a flag they name cannot drift away.
+PARSED_PAGES = ("robot.md", "cluster.md")
 PARSED_ONLY = {"reproduce", "sweep"}  # long jobs; the smoke preset itself runs in tests/test_reproduce.py
 
 
 def _commands(page: Path) -> list[list[str]]:
     blocks = re.findall(r"```bash\n(.*?)```", page.read_text(), flags=re.S)
     lines = [line.split("  #")[0].strip() for block in blocks for line in block.splitlines()]
-    return [shlex.split(line)[1:] for line in lines if line.startswith("depthq ")]
+    return [shlex.split(line.removesuffix("&"))[1:] for line in lines if line.startswith("depthq ")]
 
 
 def test_every_user_page_is_run() -> None:
@@ -40,6 +44,17 @@ def test_every_user_page_is_run() -> None:
     pages = {str(p.relative_to(DOCS)) for p in [DOCS / "getting-started.md", *DOCS.glob("guides/*.md"),
                                                  *DOCS.glob("networks/*.md")] if _commands(p)}
     assert pages <= set(PAGES), sorted(pages - set(PAGES))
+
+
+@pytest.mark.parametrize("page", PARSED_PAGES)
+def test_the_ros_and_cluster_guides_commands_parse(page: str) -> None:
+    commands = _commands(DOCS / page)
+    assert commands
+    for argv in commands:
+        try:
+            build_parser(argv[0]).parse_args(argv)
+        except SystemExit as stop:  # `--help`
+            assert stop.code == 0 and "--help" in argv, argv
 
 
 @pytest.mark.slow
