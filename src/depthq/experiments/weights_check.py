@@ -1,0 +1,135 @@
+"""Which weights a checkpoint acts with, looked at on its own validation frames
+(docs/design.md#weights-check).
+
+    python -m depthq.experiments.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
+    python -m depthq.experiments.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT
+
+For each weights choice (default: final, best and, where the training kept it, average): the bins it
+predicts as 0 for every candidate action on every frame (dead: a 0 is no reading, so its policy never
+sees that bin), the median spread of its candidates' scores, and how often each action wins, on the
+first `--frames` validation frames of the checkpoint's dataset (from the feature cache). With
+`--canyons`, each choice is also driven there (`depthq evaluate --weights W`, into OUT/<weights>/):
+the distance to the first collision beside what the frames show. Make choices on `val` canyons.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from depthq.configio import write_json
+from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError, guarded
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.nets.checkpoint import dataset_record, read_config, weights_stem
+from depthq.policies.qnet import QNetPolicy
+from depthq.train.features import load_features
+
+PROG = "python -m depthq.experiments.weights_check"
+DEAD = 1e-6  # m: a bin predicted at or below this is no reading
+
+
+def available(folder: Path) -> tuple[str, ...]:
+    """The weights choices a checkpoint holds: final and best, and average when its training kept one."""
+    return ("final", "best") + (("average",) if (Path(folder) / "average.safetensors").is_file() else ())
+
+
+def validation_features(folder: Path, frames: int) -> torch.Tensor:
+    """The trunk features of the first `frames` validation frames of the checkpoint's dataset."""
+    config = read_config(folder)
+    dataset = Dataset.open(Path(dataset_record(config).path))
+    train = config["train"]
+    table = load_features(dataset, train["trunk"], int(train["input_size"]), progress=False)
+    spans = [table.runs[name] for name in sorted(table.runs) if name.startswith("val_")]
+    if not spans:
+        raise ConfigError(f"{folder}: its dataset {dataset.root} has no validation runs to look at")
+    rows = np.concatenate([np.arange(first, first + n) for first, n in spans])[:frames]
+    return torch.from_numpy(np.asarray(table.features[rows], dtype=np.float32))
+
+
+def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, Any]]:
+    """Per weights choice: dead bins, the median and 90th percentile of the candidates' score spread,
+    and the share of frames on which each action wins."""
+    features = validation_features(folder, frames)
+    out = {}
+    for choice in weights:
+        policy = QNetPolicy.from_checkpoint(folder, weights=choice)
+        values = policy.candidate_values(features)  # (F, A, 26) bins or (F, A) probabilities
+        actions = np.asarray(policy.actions)
+        scores = np.stack([policy.network.scores(v) for v in values])
+        spread = scores.max(1) - scores.min(1)
+        chosen = np.array([policy.network.choose(v, actions) for v in values])
+        dead = np.flatnonzero((values <= DEAD).all(axis=(0, 1))) if values.ndim == 3 else np.array([], int)
+        out[choice] = {
+            "frames": len(values),
+            "dead_bins": dead.tolist(),
+            "spread_median": float(np.median(spread)),
+            "spread_p90": float(np.percentile(spread, 90)),
+            "chosen": {f"{a:+g}": float(np.mean(chosen == a)) for a in actions},
+        }
+    return out
+
+
+def drive(folder: Path, weights: tuple[str, ...], canyons: str, out: Path) -> dict[str, dict[str, Any]]:
+    """Each weights choice driven in `canyons` (one worker): its summary, from OUT/<weights>/."""
+    config = EvalConfig(canyons=parse_canyon_set(canyons))
+    return {choice: evaluate(str(folder), out / choice, replace(config, weights=choice), workers=1,
+                             progress=False, video=False)["summary"]
+            for choice in weights}
+
+
+def table(measured: dict[str, dict[str, Any]], driven: dict[str, dict[str, Any]] | None = None) -> str:
+    """Markdown: one row per weights choice."""
+    actions = next(iter(measured.values()))["chosen"]
+    head = ["weights", "dead bins", "score spread, median (p90)", *(f"chooses {a}" for a in actions)]
+    if driven:
+        head.append("driven: m to first collision (ends)")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for choice, m in measured.items():
+        cells = [choice, ", ".join(map(str, m["dead_bins"])) or "none",
+                 f"{m['spread_median']:.3f} ({m['spread_p90']:.3f})",
+                 *(f"{share:.0%}" for share in m["chosen"].values())]
+        if driven:
+            s = driven[choice]
+            cells.append(f"{s['distance_to_collision_mean']:.2f} ({s['reached_end']})")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
+    parser.add_argument("checkpoint", type=Path, help="a checkpoint folder")
+    parser.add_argument("--weights", default=None,
+                        help="weights choices, comma-separated: final, best, average, epoch:N (default: "
+                        "final, best and average where kept)")
+    parser.add_argument("--frames", type=int, default=500, help="validation frames looked at")
+    parser.add_argument("--canyons", default=None, help="also drive each choice in these canyons (val ones)")
+    parser.add_argument("--out", type=Path, default=None, help="with --canyons: the evaluations' folder")
+    args = parser.parse_args(argv)
+
+    def work() -> int:
+        weights = available(args.checkpoint) if args.weights is None else tuple(args.weights.split(","))
+        for choice in weights:
+            weights_stem(choice)  # a bad choice fails here, before any work
+        if args.frames < 1:
+            raise ConfigError(f"--frames must be >= 1, got {args.frames}")
+        if args.canyons is not None and args.out is None:
+            raise ConfigError("--canyons needs --out, the evaluations' folder")
+        measured = measure(args.checkpoint, weights, args.frames)
+        driven = drive(args.checkpoint, weights, args.canyons, args.out) if args.canyons else None
+        if args.out is not None:
+            write_json(args.out / "weights_check.json", {"measured": measured, "driven": driven})
+        print(table(measured, driven))
+        return 0
+
+    return guarded(PROG, work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

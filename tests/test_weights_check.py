@@ -1,0 +1,49 @@
+"""The weights check (`depthq.experiments.weights_check`): per weights choice, dead bins, the spread of
+the candidates' scores and the actions chosen on the checkpoint's validation frames, and each choice
+driven; bad input named before any work."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from depthq.configio import read_json
+from depthq.experiments import weights_check
+
+
+def test_each_weights_choice_is_looked_at_and_driven(toy_nets: dict[str, Path], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    depth, coll = toy_nets["depth"], toy_nets["coll"]
+    assert weights_check.available(depth) == ("final", "best", "average")  # the depth-first default averages
+    assert weights_check.available(coll) == ("final", "best")
+    measured = weights_check.measure(depth, ("final", "average"), frames=12)
+    for m in measured.values():
+        assert m["frames"] == 12 and set(m["dead_bins"]) <= set(range(26))
+        assert 0 <= m["spread_median"] <= m["spread_p90"]
+        assert sum(m["chosen"].values()) == pytest.approx(1.0) and list(m["chosen"]) == ["-1", "+0", "+1"]
+    assert weights_check.measure(coll, ("best",), frames=12)["best"]["dead_bins"] == []  # no bins
+
+    out = tmp_path / "check"
+    argv = [str(depth), "--weights", "final,best", "--frames", "12", "--canyons", "val:1000",
+            "--out", str(out)]
+    assert weights_check.main(argv) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[0].startswith("| weights | dead bins |") and [r.split(" | ")[0] for r in rows[2:]] == [
+        "| final", "| best"]
+    record = read_json(out / "weights_check.json")
+    for choice in ("final", "best"):
+        summary = read_json(out / choice / "summary.json")
+        assert summary["summary"]["distance_to_collision_mean"] == record["driven"][choice][
+            "distance_to_collision_mean"]
+        assert summary["policy"]["weights"] == ("last" if choice == "final" else choice)
+
+
+def test_bad_input_is_named_before_any_work(toy_nets: dict[str, Path], tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    depth = str(toy_nets["depth"])
+    for argv, named in (([depth, "--weights", "mean"], "mean"), ([depth, "--frames", "0"], "--frames"),
+                        ([depth, "--canyons", "val:1000"], "--out")):
+        assert weights_check.main(argv) == 2
+        assert named in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
