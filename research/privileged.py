@@ -79,7 +79,7 @@ def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> to
                                  action_scale=config.action_scale, lookahead=1, feature_projection=0,
                                  form="concat", output_bias=config.output_bias))
     model = torch.nn.Module()
-    model.head = head  # `train_step` runs `samples.predict(model, batch)`, which calls model.head
+    model.head = head  # `train_step` runs the head on `samples.trunk_features(model, batch)`: the cached ones
     optimizer = make_optimizer(head, config.learning_rate, config.weight_decay, config.rho, config.eps)
     loss_fn, rng = loss_function(config), np.random.default_rng(config.seed)
     head.train()

@@ -18,7 +18,7 @@ from depthq.sim.topdown import draw_run, plot_runs
 
 ACTION_NAMES = {-1.0: "right (−1)", 0.0: "straight (0)", 1.0: "left (+1)"}
 # A policy that is no network's (the heuristic, OU): the true depth alone, drawn as a network's bins.
-DEPTH_PLOT = ValuePlot("bins", "depth (m)", (0.0, 2.2))
+DEPTH_PLOT = get_network("depth").plot
 
 
 def value_plot(policy: dict[str, Any]) -> ValuePlot:

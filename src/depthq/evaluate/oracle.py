@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import json
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +69,7 @@ class Oracle:
             raise ConfigError(f"oracle {text!r}: only a depth oracle takes a rule")
         return cls(signal, k, Selection(rule) if rule else Selection())
 
-    @property
+    @cached_property
     def network(self) -> Network:
         """The network whose signal it predicts."""
         return get_network(self.signal)

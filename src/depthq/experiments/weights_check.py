@@ -37,7 +37,8 @@ DEAD = 1e-6  # m: a bin predicted at or below this is no reading
 
 def available(folder: Path) -> tuple[str, ...]:
     """The weights choices a checkpoint holds: final and best, and average when its training kept one."""
-    return ("final", "best") + (("average",) if (Path(folder) / "average.safetensors").is_file() else ())
+    return tuple(choice for choice in ("final", "best", "average")
+                 if (Path(folder) / f"{weights_stem(choice)}.safetensors").is_file())
 
 
 def validation_features(folder: Path, frames: int) -> torch.Tensor:

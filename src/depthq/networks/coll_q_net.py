@@ -28,7 +28,6 @@ class CollQNet(Network):
     lr = 0.1
     view = "collision"
     label_sources = ("lidar",)  # it learns from the bump, not from depth bins
-    # Depth-Q-Net's settings: it looks ahead through its target's horizon, with the paper's head.
     # Depth-Q-Net's settings (its lookahead, head form, bootstrap, depth loss, labels' source, bins'
     # initial bias): a sweep variant that sets them trains each Coll-Q-Net once, under its own name.
     unused_settings = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
@@ -60,6 +59,11 @@ class CollQNet(Network):
     def output(self, raw: torch.Tensor) -> torch.Tensor:
         """Logits → P(collision within H)."""
         return probability(raw)
+
+    def outputs(self, raw: torch.Tensor) -> torch.Tensor:
+        """Per frame: a vectorised sigmoid's tail elements take a scalar path (a frame's values would
+        depend on how many frames were decided together)."""
+        return torch.stack([probability(logits) for logits in raw])
 
     def true_scores(self, bins: np.ndarray, bumped: np.ndarray, selection: Selection) -> np.ndarray:
         return bumped.astype(np.float64)

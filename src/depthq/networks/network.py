@@ -117,6 +117,10 @@ class Network:
         """One frame's candidates' raw head outputs → their values (what a policy and a graph give)."""
         return raw
 
+    def outputs(self, raw: torch.Tensor) -> torch.Tensor:
+        """`output` of F frames' raw outputs (F, N, …) at once: the same values."""
+        return raw
+
     def scores(self, values: np.ndarray, selection: Selection | None = None) -> np.ndarray:
         """One frame's values → one score per candidate (the best wins: `maximise`)."""
         return np.asarray(values, np.float64)

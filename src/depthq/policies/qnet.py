@@ -98,10 +98,7 @@ class QNetPolicy(GreedyPolicy):
     def candidate_values(self, features: torch.Tensor) -> np.ndarray:
         """`values` of F frames' features (F, D), (F, N, …): one head call over all their candidates
         (`QNet.candidate_outputs`)."""
-        out = self.net.candidate_outputs(features, self._actions_t)
-        # per frame: a vectorised sigmoid's tail elements take a scalar path (a frame's values would
-        # depend on how many frames were decided together)
-        return torch.stack([self.network.output(raw) for raw in out]).cpu().numpy()
+        return self.network.outputs(self.net.candidate_outputs(features, self._actions_t)).cpu().numpy()
 
     def act_batch(self, observations: Sequence[Observation]) -> list[float]:
         """`act` on each observation (`BatchPolicy`): one trunk pass over all frames, one head pass

@@ -83,6 +83,8 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
     """The paper's Table I columns, mean (std) over seeds and the 95 % interval of the mean for
     distance and success; one row per (variant, training-set size)."""
     results = collect_results(out, sweep)
+    published = sorted(paper_networks(), key=lambda network: network.name)  # as the columns: by name
+    heading = " / ".join(network.label for network in published)
     rows = []
     for variant, n, row in _groups(sweep):
         for net in sorted(sweep.nets):
@@ -101,9 +103,7 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
             row[f"seeds {label}"] = str(len(runs))
             offline = f"{network.metric_title} {label}"
             row[offline] = _cell([r["offline"]["value"] for r in runs if "offline" in r], ".3f")
-        published = sorted(paper_networks(), key=lambda network: network.name)  # as the columns: by name
         cells = [str(network.paper[n][1]) for network in published if n in network.paper]
-        heading = " / ".join(network.label for network in published)
         row[f"paper: success {heading}"] = " / ".join(cells) if cells else "–"
         rows.append(row)
     return rows

@@ -47,7 +47,8 @@ class Batch:
 
 
 class Samples(ABC):
-    """The samples of a view; `draw` picks batch indices, `batch` builds one, `predict` runs the model."""
+    """The samples of a view; `draw` picks batch indices, `batch` builds one, `predict` runs the model,
+    `trunk_features` the part before the head."""
 
     def __init__(self, arrays: dict[str, np.ndarray]) -> None:
         self.run_offsets = arrays["run_offsets"]
@@ -66,6 +67,10 @@ class Samples(ABC):
 
     @abstractmethod
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor: ...
+
+    @abstractmethod
+    def trunk_features(self, model: QNet, batch: Batch) -> torch.Tensor:
+        """The trunk features of the batch's frames (cached, or the trunk run on them)."""
 
 
 class FeatureSamples(Samples):
@@ -107,6 +112,9 @@ class FeatureSamples(Samples):
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model.head(batch.inputs, batch.actions)
 
+    def trunk_features(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return batch.inputs
+
 
 def _stack(tensors: list[torch.Tensor]) -> torch.Tensor:
     """(len, …): one tensor as a view (no copy of a large feature table), two stacked."""
@@ -136,3 +144,6 @@ class ImageSamples(Samples):
 
     def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
         return model(batch.inputs, batch.actions)
+
+    def trunk_features(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return model.trunk(batch.inputs)

@@ -173,7 +173,7 @@ def train_step(
     `Head.training_loss`: a "depth_first" head fits each part to its own target)."""
     head, bf16 = model.head, precision == "bf16"
     with torch.autocast(device_type=batch.inputs.device.type, dtype=torch.bfloat16, enabled=bf16):
-        features = batch.inputs if batch.inputs.ndim == 2 else model.trunk(batch.inputs)
+        features = samples.trunk_features(model, batch)
         outputs = tuple(out.float() for out in head.training_outputs(features, batch.actions, batch.current))
     loss = head.training_loss(outputs, batch.targets, batch.current, loss_fn)
     value = loss.item()
