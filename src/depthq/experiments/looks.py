@@ -379,9 +379,13 @@ def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COL
     for net, label in NETS.items():
         own, away = _distances(out, net, flat, flat, seeds), _distances(out, net, flat, heldout, seeds)
         back = _distances(out, net, randomised, heldout, seeds)
-        loss, lost = _paired(own, away)
-        gain, gained = _paired(away, back)
-        share = (f"{np.mean(gained) / -np.mean(lost):.0%}" if lost and gained and np.mean(lost) < 0 else "–")
+        loss, _ = _paired(own, away)
+        gain, _ = _paired(away, back)
+        # the share over the seeds all three have, so the loss and the gain are of the same seeds
+        common = {s: own[s] for s in set(own) & set(away) & set(back)}
+        lost = _paired(common, {s: away[s] for s in common})[1]
+        gained = _paired({s: away[s] for s in common}, {s: back[s] for s in common})[1]
+        share = (f"{np.mean(gained) / -np.mean(lost):.0%}" if lost and np.mean(lost) < 0 else "–")
         rows.append({
             "Q-net": label,
             f"trained {flat}, driven {flat}: m": mean_interval(_d2c(own), ".2f", len(seeds)),

@@ -11,7 +11,6 @@ the `eval` canyons), or a folder of evaluations named by `--pattern`.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,7 @@ from depthq.configio import read_json
 from depthq.errors import ConfigError, guarded
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.sweep import Settings, Variant, differing, parse_ints, parse_setting
-from depthq.report.cells import mean_interval
+from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.report.findings import FINDINGS, Evidence, record_evidence
 
 PROG = "python -m depthq.report.paired"
@@ -35,10 +34,10 @@ def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], 
     differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
     for n in sizes:
         for seed in seeds:
-            found = [Path(sweep) / pattern.format(net=net, n=n, seed=seed, model=model_name(
-                net, n, seed, differs[net])) / "summary.json" for net in ("coll", "depth")]
-            if all(f.is_file() for f in found):
-                results.setdefault(n, {})[seed] = [json.loads(f.read_text())["summary"] for f in found]
+            found = [evaluation_summary(Path(sweep) / pattern.format(
+                net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net]))) for net in ("coll", "depth")]
+            if all(found):
+                results.setdefault(n, {})[seed] = found
     return results
 
 
