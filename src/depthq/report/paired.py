@@ -35,7 +35,8 @@ def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], 
     for n in sizes:
         for seed in seeds:
             found = [evaluation_summary(Path(sweep) / pattern.format(
-                net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net]))) for net in ("coll", "depth")]
+                net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net])))
+                for net in ("coll", "depth")]
             if all(found):
                 results.setdefault(n, {})[seed] = found
     return results
