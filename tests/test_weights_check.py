@@ -20,17 +20,21 @@ def test_each_weights_choice_is_looked_at_and_driven(toy_nets: dict[str, Path], 
     measured = weights_check.measure(depth, ("final", "average"), frames=12)
     for m in measured.values():
         assert m["frames"] == 12 and set(m["dead_bins"]) <= set(range(26))
+        assert 0 <= m["phantom"] <= 1 and set(m["phantom_bins"]) <= set(range(26)) - set(m["dead_bins"])
+        assert bool(m["phantom_bins"]) == (m["phantom"] > 0)
         assert 0 <= m["spread_median"] <= m["spread_p90"]
         assert sum(m["chosen"].values()) == pytest.approx(1.0) and list(m["chosen"]) == ["-1", "+0", "+1"]
-    assert weights_check.measure(coll, ("best",), frames=12)["best"]["dead_bins"] == []  # no bins
+    assert weights_check.range_min(depth) == 0.12  # the toy dataset's LiDAR
+    coll_best = weights_check.measure(coll, ("best",), frames=12)["best"]
+    assert coll_best["dead_bins"] == coll_best["phantom_bins"] == [] and coll_best["phantom"] == 0  # no bins
 
     out = tmp_path / "check"
     argv = [str(depth), "--weights", "final,best", "--frames", "12", "--canyons", "val:1000",
             "--out", str(out)]
     assert weights_check.main(argv) == 0
     rows = capsys.readouterr().out.splitlines()
-    assert rows[0].startswith("| weights | dead bins |") and [r.split(" | ")[0] for r in rows[2:]] == [
-        "| final", "| best"]
+    assert rows[0].startswith("| weights | dead bins | phantom readings (bins) |")
+    assert [r.split(" | ")[0] for r in rows[2:]] == ["| final", "| best"]
     record = read_json(out / "weights_check.json")
     for choice in ("final", "best"):
         summary = read_json(out / choice / "summary.json")

@@ -6,8 +6,10 @@
 
 For each weights choice (default: final, best and, where the training kept it, average): the bins it
 predicts as 0 for every candidate action on every frame (dead: a 0 is no reading, so its policy never
-sees that bin), the median spread of its candidates' scores, and how often each action wins, on the
-first `--frames` validation frames of the checkpoint's dataset (from the feature cache). With
+sees that bin), the share of candidates whose nearest predicted reading is a phantom (above 0 but
+nearer than the LiDAR's minimum range, so no label had it) and the bins that give them, the median
+spread of its candidates' scores, and how often each action wins, on the first `--frames` validation
+frames of the checkpoint's dataset (from the feature cache). With
 `--canyons`, each choice is also driven there (`depthq evaluate --weights W`, into OUT/<weights>/):
 the distance to the first collision beside what the frames show. Make choices on `val` canyons.
 """
@@ -29,6 +31,7 @@ from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.checkpoint import dataset_record, read_config, weights_stem
 from depthq.policies.qnet import QNetPolicy
+from depthq.sim.sensors import LidarConfig
 from depthq.train.features import load_features
 
 PROG = "python -m depthq.experiments.weights_check"
@@ -54,10 +57,19 @@ def validation_features(folder: Path, frames: int) -> torch.Tensor:
     return torch.from_numpy(np.asarray(table.features[rows], dtype=np.float32))
 
 
+def range_min(folder: Path) -> float:
+    """The LiDAR's minimum range in the checkpoint's dataset (m; a robot's recording: the default
+    LiDAR's): no bin it labels is nearer."""
+    env = dataset_record(read_config(folder)).env
+    return float(env["world"]["lidar"]["range_min"]) if env else LidarConfig().range_min
+
+
 def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, Any]]:
-    """Per weights choice: dead bins, the median and 90th percentile of the candidates' score spread,
-    and the share of frames on which each action wins."""
+    """Per weights choice: dead bins, phantom readings (their share of candidates and their bins), the
+    median and 90th percentile of the candidates' score spread, and the share of frames on which each
+    action wins."""
     features = validation_features(folder, frames)
+    floor = range_min(folder)
     out = {}
     for choice in weights:
         policy = QNetPolicy.from_checkpoint(folder, weights=choice)
@@ -66,10 +78,19 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
         scores = np.stack([policy.network.scores(v) for v in values])
         spread = scores.max(1) - scores.min(1)
         chosen = np.array([policy.network.choose(v, actions) for v in values])
-        dead = np.flatnonzero((values <= DEAD).all(axis=(0, 1))) if values.ndim == 3 else np.array([], int)
+        dead, phantom, phantom_bins = np.array([], int), 0.0, []
+        if values.ndim == 3:  # bins: (F, A, n_bins)
+            dead = np.flatnonzero((values <= DEAD).all(axis=(0, 1)))
+            readings = np.where(values > DEAD, values, np.inf)
+            nearest = readings.min(axis=2)
+            ghost = nearest < floor
+            phantom = float(ghost.mean())
+            phantom_bins = sorted(set(readings.argmin(axis=2)[ghost].tolist()))
         out[choice] = {
             "frames": len(values),
             "dead_bins": dead.tolist(),
+            "phantom": phantom,
+            "phantom_bins": phantom_bins,
             "spread_median": float(np.median(spread)),
             "spread_p90": float(np.percentile(spread, 90)),
             "chosen": {f"{a:+g}": float(np.mean(chosen == a)) for a in actions},
@@ -88,12 +109,15 @@ def drive(folder: Path, weights: tuple[str, ...], canyons: str, out: Path) -> di
 def table(measured: dict[str, dict[str, Any]], driven: dict[str, dict[str, Any]] | None = None) -> str:
     """Markdown: one row per weights choice."""
     actions = next(iter(measured.values()))["chosen"]
-    head = ["weights", "dead bins", "score spread, median (p90)", *(f"chooses {a}" for a in actions)]
+    head = ["weights", "dead bins", "phantom readings (bins)", "score spread, median (p90)",
+            *(f"chooses {a}" for a in actions)]
     if driven:
         head.append("driven: m to first collision (ends)")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for choice, m in measured.items():
         cells = [choice, ", ".join(map(str, m["dead_bins"])) or "none",
+                 f"{m['phantom']:.1%}" + (f" ({', '.join(map(str, m['phantom_bins']))})"
+                                           if m["phantom_bins"] else ""),
                  f"{m['spread_median']:.3f} ({m['spread_p90']:.3f})",
                  *(f"{share:.0%}" for share in m["chosen"].values())]
         if driven:
