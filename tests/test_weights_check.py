@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from depthq.configio import read_json
+from depthq.errors import ConfigError
 from depthq.experiments import weights_check
 
 
@@ -41,6 +42,17 @@ def test_each_weights_choice_is_looked_at_and_driven(toy_nets: dict[str, Path], 
         assert summary["summary"]["distance_to_collision_mean"] == record["driven"][choice][
             "distance_to_collision_mean"]
         assert summary["policy"]["weights"] == ("last" if choice == "final" else choice)
+
+
+def test_parts_pair_one_choice_perception_with_another_dynamics(toy_nets: dict[str, Path]) -> None:
+    depth = toy_nets["depth"]
+    mixed = weights_check.parts(depth, ("final", "average"), frames=12)
+    measured = weights_check.measure(depth, ("final", "average"), frames=12)
+    for choice in ("final", "average"):  # a choice paired with itself is that choice
+        assert mixed[choice][choice] == pytest.approx(measured[choice]["spread_median"])
+    assert set(mixed["final"]) == {"final", "average"}
+    with pytest.raises(ConfigError, match="depth_first"):
+        weights_check.parts(toy_nets["coll"], ("final",), frames=12)
 
 
 def test_bad_input_is_named_before_any_work(toy_nets: dict[str, Path], tmp_path: Path,

@@ -3,6 +3,7 @@
 
     python -m depthq.experiments.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
     python -m depthq.experiments.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT
+    python -m depthq.experiments.weights_check CHECKPOINT --parts
 
 For each weights choice (default: final, best and, where the training kept it, average): the bins it
 predicts as 0 for every candidate action on every frame (dead: a 0 is no reading, so its policy never
@@ -11,12 +12,15 @@ nearer than the LiDAR's minimum range, so no label had it) and the bins that giv
 spread of its candidates' scores, and how often each action wins, on the first `--frames` validation
 frames of the checkpoint's dataset (from the feature cache). With
 `--canyons`, each choice is also driven there (`depthq evaluate --weights W`, into OUT/<weights>/):
-the distance to the first collision beside what the frames show. Make choices on `val` canyons.
+the distance to the first collision beside what the frames show. With `--parts` (a depth_first head),
+the score spread of every pairing of one choice's perception with another's dynamics: which part of a
+choice moves its actions. Make choices on `val` canyons.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -30,6 +34,7 @@ from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.nets.checkpoint import dataset_record, read_config, weights_stem
+from depthq.nets.heads import DepthFirstHead
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.sensors import LidarConfig
 from depthq.train.features import load_features
@@ -76,7 +81,7 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
         values = policy.candidate_values(features)  # (F, A, 26) bins or (F, A) probabilities
         actions = np.asarray(policy.actions)
         scores = np.stack([policy.network.scores(v) for v in values])
-        spread = scores.max(1) - scores.min(1)
+        spreads = scores.max(1) - scores.min(1)
         chosen = np.array([policy.network.choose(v, actions) for v in values])
         dead, phantom, phantom_bins = np.array([], int), 0.0, []
         if values.ndim == 3:  # bins: (F, A, n_bins)
@@ -91,11 +96,42 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
             "dead_bins": dead.tolist(),
             "phantom": phantom,
             "phantom_bins": phantom_bins,
-            "spread_median": float(np.median(spread)),
-            "spread_p90": float(np.percentile(spread, 90)),
+            "spread_median": float(np.median(spreads)),
+            "spread_p90": float(np.percentile(spreads, 90)),
             "chosen": {f"{a:+g}": float(np.mean(chosen == a)) for a in actions},
         }
     return out
+
+
+def spread(policy: QNetPolicy, features: torch.Tensor) -> float:
+    """The median over frames of the spread of the candidates' scores (m or probability)."""
+    scores = np.stack([policy.network.scores(v) for v in policy.candidate_values(features)])
+    return float(np.median(scores.max(1) - scores.min(1)))
+
+
+def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, float]]:
+    """A depth_first head's score spread with one choice's perception (rows) and another's dynamics
+    (columns): which part of a weights choice changes its actions."""
+    features = validation_features(folder, frames)
+    policies = {choice: QNetPolicy.from_checkpoint(folder, weights=choice) for choice in weights}
+    if not all(isinstance(p.net.head, DepthFirstHead) for p in policies.values()):
+        raise ConfigError(f"{folder}: --parts needs a depth_first head (perception, then dynamics)")
+    out: dict[str, dict[str, float]] = {}
+    for perceive, policy in policies.items():
+        out[perceive] = {}
+        for dynamics, other in policies.items():
+            mixed = copy.deepcopy(policy)
+            mixed.net.head.output["dynamics"].load_state_dict(other.net.head.output["dynamics"].state_dict())
+            out[perceive][dynamics] = spread(mixed, features)
+    return out
+
+
+def parts_table(measured: dict[str, dict[str, float]]) -> str:
+    """Markdown: perception's choice by row, dynamics' by column, the median score spread in each cell."""
+    choices = list(measured)
+    lines = ["| perception \\ dynamics | " + " | ".join(choices) + " |", "|" + "---|" * (len(choices) + 1)]
+    lines += ["| " + " | ".join([p, *(f"{measured[p][d]:.3f}" for d in choices)]) + " |" for p in choices]
+    return "\n".join(lines)
 
 
 def drive(folder: Path, weights: tuple[str, ...], canyons: str, out: Path) -> dict[str, dict[str, Any]]:
@@ -135,7 +171,10 @@ def main(argv: list[str] | None = None) -> int:
                         "final, best and average where kept)")
     parser.add_argument("--frames", type=int, default=500, help="validation frames looked at")
     parser.add_argument("--canyons", default=None, help="also drive each choice in these canyons (val ones)")
-    parser.add_argument("--out", type=Path, default=None, help="with --canyons: the evaluations' folder")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="where weights_check.json goes (with --canyons: and the evaluations)")
+    parser.add_argument("--parts", action="store_true",
+                        help="also pair each choice's perception with each choice's dynamics (depth_first)")
     args = parser.parse_args(argv)
 
     def work() -> int:
@@ -147,10 +186,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.canyons is not None and args.out is None:
             raise ConfigError("--canyons needs --out, the evaluations' folder")
         measured = measure(args.checkpoint, weights, args.frames)
+        mixed = parts(args.checkpoint, weights, args.frames) if args.parts else None
         driven = drive(args.checkpoint, weights, args.canyons, args.out) if args.canyons else None
         if args.out is not None:
-            write_json(args.out / "weights_check.json", {"measured": measured, "driven": driven})
+            write_json(args.out / "weights_check.json",
+                       {"measured": measured, "parts": mixed, "driven": driven})
         print(table(measured, driven))
+        if mixed:
+            print("\n" + parts_table(mixed))
         return 0
 
     return guarded(PROG, work)
