@@ -62,6 +62,7 @@ from depthq.pipeline.sweep import Model, Settings, Sweep, parse_ints, retarget, 
 from depthq.report import html as page
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, mean_interval
+from depthq.report.paired import Summaries, by_seed
 from depthq.report.tables import markdown
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
@@ -296,15 +297,14 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
     return 0
 
 
-def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]
-               ) -> dict[int, dict[str, Any]]:
+def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]) -> Summaries:
     """seed → evaluation summary of `net` trained in `look`, driven in `drive`, where it is written."""
     folder = Path(out) / look / f"eval_{drive}"
     found = {seed: evaluation_summary(folder / f"{net}_s{seed}") for seed in seeds}
     return {seed: summary for seed, summary in found.items() if summary is not None}
 
 
-def _d2c(found: dict[int, dict[str, Any]]) -> list[float]:
+def _d2c(found: Summaries) -> list[float]:
     return [float(s["distance_to_collision_mean"]) for s in found.values()]
 
 
@@ -362,12 +362,12 @@ def labeller_rows(out: Path, train_looks: tuple[str, ...] = TRAIN_LOOKS,
     return rows
 
 
-def _paired(first: dict[int, dict[str, Any]], second: dict[int, dict[str, Any]]) -> tuple[str, list[float]]:
-    """second − first, paired by seed over the seeds both have: 'mean [95 % interval] (seeds)'."""
-    both = sorted(set(first) & set(second))
-    diff = [float(second[s]["distance_to_collision_mean"] - first[s]["distance_to_collision_mean"])
-            for s in both]
-    return (f"{mean_interval(diff, '+.2f')} (seeds {','.join(map(str, both))})" if diff else "–"), diff
+def _paired(first: Summaries, second: Summaries) -> tuple[str, list[float]]:
+    """second − first, m to the first collision paired by seed (`by_seed`): 'mean [95 % interval]
+    (seeds)', and the differences."""
+    pairs = by_seed(first, second)
+    text = f"{mean_interval(pairs.diff, '+.2f')} (seeds {','.join(map(str, pairs.seeds))})"
+    return (text if pairs.diff else "–"), pairs.diff
 
 
 def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COLOURS,
@@ -382,9 +382,9 @@ def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COL
         loss, _ = _paired(own, away)
         gain, _ = _paired(away, back)
         # the share over the seeds all three have, so the loss and the gain are of the same seeds
-        common = {s: own[s] for s in set(own) & set(away) & set(back)}
-        lost = _paired(common, {s: away[s] for s in common})[1]
-        gained = _paired({s: away[s] for s in common}, {s: back[s] for s in common})[1]
+        common = set(own) & set(away) & set(back)
+        lost = by_seed({s: own[s] for s in common}, away).diff
+        gained = by_seed({s: away[s] for s in common}, back).diff
         share = (f"{np.mean(gained) / -np.mean(lost):.0%}" if lost and np.mean(lost) < 0 else "–")
         rows.append({
             "Q-net": label,
@@ -408,9 +408,8 @@ def answers(out: Path, seeds: tuple[int, ...] = (0, 1, 2), randomised: str = TEX
     where = f"{Path(out) / randomised}/eval_…/*_s<seed>"
     first = f"Does the camera-label Depth-Q-Net trained {randomised} drive the {heldout} look at ≥ " \
             f"{DONE_SHARE:.0%} of its distance in the {randomised} look? "
-    both = sorted(set(camera) & set(own))
+    both, here, there, _ = by_seed(own, camera)
     if both:
-        there, here = ([float(d[s]["distance_to_collision_mean"]) for s in both] for d in (camera, own))
         share = np.mean(there) / np.mean(here)
         first += (f"**{'yes' if share >= DONE_SHARE else 'no'}**: {share:.0%} "
                   f"({mean_interval(there, '.2f')} m against {mean_interval(here, '.2f')} m, "

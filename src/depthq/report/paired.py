@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from depthq.configio import read_json
 from depthq.errors import ConfigError, guarded
@@ -26,26 +26,41 @@ PROG = "python -m depthq.report.paired"
 PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {net}_n{n}_s{seed}…)
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
+Summaries = dict[int, dict[str, Any]]  # seed → an evaluation's summary
+
+
+class Pairs(NamedTuple):
+    """Two evaluations' values of one measure over the seeds both have, and the per-seed difference."""
+
+    seeds: list[int]  # in order
+    first: list[float]
+    second: list[float]
+    diff: list[float]  # second − first, seed by seed
+
+
+def by_seed(first: Summaries, second: Summaries, key: str = "distance_to_collision_mean") -> Pairs:
+    """`key` of the summaries of `first` and `second` paired by seed (networks trained on the same runs
+    with the same seed make their comparison a paired one): over the seeds both have."""
+    seeds = sorted(set(first) & set(second))
+    a, b = ([float(summaries[s][key]) for s in seeds] for summaries in (first, second))
+    return Pairs(seeds, a, b, [y - x for x, y in zip(a, b, strict=True)])
+
+
 def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-                   variant: Variant = ()) -> dict[int, dict[int, list[dict[str, Any]]]]:
-    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary; of the
-    sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
-    results: dict[int, dict[int, list[dict[str, Any]]]] = {}
+                   variant: Variant = ()) -> dict[int, tuple[Summaries, Summaries]]:
+    """Per size with a seed of both networks evaluated: (Coll-Q-Net's, Depth-Q-Net's) summaries of
+    the seeds both have; of the sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
+    results: dict[int, tuple[Summaries, Summaries]] = {}
     differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
     for n in sizes:
         for seed in seeds:
-            found = [evaluation_summary(Path(sweep) / pattern.format(
+            coll, depth = (evaluation_summary(Path(sweep) / pattern.format(
                 net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net])))
-                for net in ("coll", "depth")]
-            if all(found):
-                results.setdefault(n, {})[seed] = found
+                for net in ("coll", "depth"))
+            if coll and depth:
+                both = results.setdefault(n, ({}, {}))
+                both[0][seed], both[1][seed] = coll, depth
     return results
-
-
-def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[float], ...]:
-    """Coll-Q-Net's and Depth-Q-Net's `key` per seed, and their difference (Depth − Coll)."""
-    coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
-    return coll, depth, [d - c for c, d in zip(coll, depth, strict=True)]
 
 
 def _sweep_train(sweep: Path) -> Settings:
@@ -70,10 +85,11 @@ def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern:
     sweep's models in it."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
+    for n, (coll, depth) in paired_results(sweep, sizes, seeds, pattern, variant).items():
         for label, key, fmt in PAIRED:
-            cells = [mean_interval(v, fmt) for v in _columns(both, key)]
-            lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
+            pairs = by_seed(coll, depth, key)
+            cells = [mean_interval(v, fmt) for v in (pairs.first, pairs.second, pairs.diff)]
+            lines.append(f"| {n} | {','.join(map(str, coll))} | {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -86,8 +102,8 @@ def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
         raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json), so it names no canyons to claim")
     record = read_json(marker)["sweep"]
     out = {}
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
-        coll, depth, diff = _columns(both, "distance_to_collision_mean")
+    for n, summaries in paired_results(sweep, sizes, seeds, pattern, variant).items():
+        _, coll, depth, diff = by_seed(*summaries)
         ahead = sum(d > 0 for d in diff)
         key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
         out[key] = (f"to the first collision Depth-Q-Net {mean_interval(depth, '.2f')} m, Coll-Q-Net "
