@@ -44,7 +44,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, read_json, write_json
+from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.data.stats import label_errors
@@ -117,12 +117,9 @@ PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller
 _GONE = object()
 
 
-def _flat(config: Any, prefix: str = "") -> dict[str, Any]:
+def _flat(config: Any) -> dict[str, Any]:
     """A config's fields by path ('samples.horizon'), JSON values; a training's "lr" its effective rate."""
-    values = json.loads(json.dumps(asdict(config))) if not isinstance(config, dict) else config
-    out: dict[str, Any] = {}
-    for key, value in values.items():
-        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key: value})
+    out = field_paths(json.loads(json.dumps(asdict(config))))
     if isinstance(config, TrainConfig):
         out["lr"] = config.learning_rate
     return out
