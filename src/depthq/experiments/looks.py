@@ -47,7 +47,7 @@ from tqdm import tqdm
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
-from depthq.data.stats import label_errors
+from depthq.data.stats import error_cell, label_errors
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
@@ -353,7 +353,7 @@ def labeller_rows(out: Path, train_looks: tuple[str, ...] = TRAIN_LOOKS,
             path = error_path(out, look, drive, method)
             record = read_json(path) if path.is_file() else None
             row[f"{drive} val runs: nearest bin, m"] = (
-                f"{camera_labels.error_cell(record['nearest'])} ({record['frames']} frames)"
+                f"{error_cell(record['nearest'])} ({record['frames']} frames)"
                 if record else "–")
         rows.append(row)
     return rows
