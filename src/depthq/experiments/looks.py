@@ -208,23 +208,31 @@ def val_collect(preset: str, look: str, val_runs: int = VAL_RUNS) -> CollectConf
     return replace(sweep.collect, runs=1, val_runs=val_runs, seed=VAL_SEED)
 
 
-def labeller_error(labeller: Path, data: Path, split: str = "val", progress: bool = True) -> dict[str, Any]:
-    """The labeller in folder `labeller` measured on a dataset's `split` (its frames labelled in memory,
-    nothing written): `depthq.data.stats.label_errors` against the LiDAR's bins, and what was measured."""
-    loaded, dataset = load_labeller(labeller), Dataset.open(data)
-    check_applicable(loaded, dataset)
+def labeller_errors(labellers: list[Path], data: Path, split: str = "val", progress: bool = True
+                    ) -> list[dict[str, Any]]:
+    """The labellers in folders `labellers` measured on a dataset's `split`, each run decoded once for
+    all of them (its frames labelled in memory, nothing written): per labeller,
+    `depthq.data.stats.label_errors` against the LiDAR's bins, and what was measured."""
+    loaded, dataset = [load_labeller(folder) for folder in labellers], Dataset.open(data)
+    for labeller in loaded:
+        check_applicable(labeller, dataset)
     entries = dataset.entries(split)
     if not entries:
-        raise ConfigError(f"{data} has no {split} runs to measure the labeller {labeller} on")
-    lidar, camera = [], []
-    bar = tqdm(entries, desc=f"labeller on {Path(data).parent.name}", unit="run", disable=not progress)
+        raise ConfigError(f"{data} has no {split} runs to measure the labellers "
+                          f"{', '.join(map(str, labellers))} on")
+    lidar: list[np.ndarray] = []
+    camera: list[list[np.ndarray]] = [[] for _ in loaded]
+    bar = tqdm(entries, desc=f"labellers on {Path(data).parent.name}", unit="run", disable=not progress)
     for entry in bar:
         one = dataset.read_run(entry, images=True)
         lidar.append(one.bins)
-        camera.append(loaded.estimate(one))
-    return {"labeller": str(labeller), "name": loaded.record["name"], "fingerprint": loaded.fingerprint,
-            "data": str(data), "data_fingerprint": dataset.fingerprint(), "split": split,
-            **label_errors(np.concatenate(lidar), np.concatenate(camera), len(entries))}
+        for labels, labeller in zip(camera, loaded, strict=True):
+            labels.append(labeller.estimate(one))
+    bins, fingerprint = np.concatenate(lidar), dataset.fingerprint()
+    return [{"labeller": str(folder), "name": labeller.record["name"], "fingerprint": labeller.fingerprint,
+             "data": str(data), "data_fingerprint": fingerprint, "split": split,
+             **label_errors(bins, np.concatenate(labels), len(entries))}
+            for folder, labeller, labels in zip(labellers, loaded, camera, strict=True)]
 
 
 def error_path(out: Path, look: str, drive: str, method: str) -> Path:
@@ -235,19 +243,24 @@ def error_path(out: Path, look: str, drive: str, method: str) -> Path:
 def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], drive_looks: tuple[str, ...],
                       method: str, val_runs: int = VAL_RUNS, workers: int = 2, progress: bool = True) -> None:
     """Each driving look's validation set collected into OUT/val_<look>/data, and each training look's
-    labeller measured on it (resumed: a finished collection or measurement is kept)."""
+    labeller measured on it, its runs decoded once for them all (resumed: a finished collection or
+    measurement is kept)."""
     for drive in drive_looks:
         data, config = Path(out) / f"val_{drive}" / "data", val_collect(preset, drive, val_runs)
         if not collection_complete(data, config):
             print(f"validation runs in the {drive} look → {data}", flush=True)
             collect(data, config, workers=workers, progress=progress)
+        todo = {}  # labeller → where its error is kept, of those not measured yet
         for look in train_looks:
             labeller = Path(out) / look / "camera" / method / "labeller"
             path = error_path(out, look, drive, method)
-            if path.is_file() or not (labeller / LABELLER_CONFIG).is_file():
-                continue
-            print(f"labeller {labeller} in the {drive} look → {path}", flush=True)
-            write_json(path, labeller_error(labeller, data, progress=progress))
+            if not path.is_file() and (labeller / LABELLER_CONFIG).is_file():
+                print(f"labeller {labeller} in the {drive} look → {path}", flush=True)
+                todo[labeller] = path
+        if todo:
+            for path, record in zip(todo.values(), labeller_errors(list(todo), data, progress=progress),
+                                    strict=True):
+                write_json(path, record)
 
 
 def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
