@@ -27,6 +27,7 @@ PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {n
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
 Summaries = dict[int, dict[str, Any]]  # seed → an evaluation's summary
+Results = dict[int, tuple[Summaries, Summaries]]  # size → (Coll-Q-Net's, Depth-Q-Net's) summaries
 
 
 class Pairs(NamedTuple):
@@ -47,10 +48,11 @@ def by_seed(first: Summaries, second: Summaries, key: str = "distance_to_collisi
 
 
 def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-                   variant: Variant = ()) -> dict[int, tuple[Summaries, Summaries]]:
+                   variant: Variant = ()) -> Results:
     """Per size with a seed of both networks evaluated: (Coll-Q-Net's, Depth-Q-Net's) summaries of
-    the seeds both have; of the sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
-    results: dict[int, tuple[Summaries, Summaries]] = {}
+    the seeds both have, each read once. `pattern` names a model's evaluation folder under `sweep`;
+    `variant`: the sweep's models in it (`depthq sweep --set`'s, one value each)."""
+    results: Results = {}
     differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
     for n in sizes:
         for seed in seeds:
@@ -76,16 +78,14 @@ def _sweep_train(sweep: Path) -> Settings:
     return tuple((k, setup[k]) for k in keys if setup.get(k) is not None)
 
 
-def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-           variant: Variant = ()) -> str:
+def paired(results: Results) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
-    of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
-    trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
-    out of their row. `pattern` names a model's evaluation folder under `sweep`; `variant`: the
-    sweep's models in it."""
+    of a sweep folder (`paired_results`): each network's mean [95 % interval] and the per-seed
+    difference's (seeds trained on the same runs make the comparison a paired one); sizes or seeds
+    not evaluated are left out of their row."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
-    for n, (coll, depth) in paired_results(sweep, sizes, seeds, pattern, variant).items():
+    for n, (coll, depth) in results.items():
         for label, key, fmt in PAIRED:
             pairs = by_seed(coll, depth, key)
             cells = [mean_interval(v, fmt) for v in (pairs.first, pairs.second, pairs.diff)]
@@ -93,16 +93,16 @@ def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern:
     return "\n".join(lines)
 
 
-def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
-                    pattern: str = PATTERN, variant: Variant = ()) -> dict[str, str]:
-    """The paired comparison in words, one sentence per size, keyed by where it was measured
-    ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
+def paired_evidence(sweep: Path, results: Results) -> dict[str, str]:
+    """The paired comparison of a sweep folder's `results` (`paired_results`) in words, one sentence
+    per size, keyed by where it was measured ('hard/eval, 4 Hz, 500 runs'): the report's evidence for
+    a claim (docs/findings.json)."""
     marker = Path(sweep) / "reproduce.json"
     if not marker.is_file():
         raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json), so it names no canyons to claim")
     record = read_json(marker)["sweep"]
     out = {}
-    for n, summaries in paired_results(sweep, sizes, seeds, pattern, variant).items():
+    for n, summaries in results.items():
         _, coll, depth, diff = by_seed(*summaries)
         ahead = sum(d > 0 for d in diff)
         key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
@@ -139,10 +139,11 @@ def main(argv: list[str] | None = None) -> int:
 def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
     sizes, seeds = parse_ints(args.sizes, "--sizes"), parse_ints(args.seeds, "--seeds")
     variant = tuple((key, _one(key, values)) for key, values in map(parse_setting, args.set))
-    print(paired(args.sweep, sizes, seeds, args.pattern, variant))
+    results = paired_results(args.sweep, sizes, seeds, args.pattern, variant)  # the summaries read once
+    print(paired(results))
     if args.claim:
         command = f"{PROG} " + " ".join(argv or sys.argv[1:])
-        for key, text in paired_evidence(args.sweep, sizes, seeds, args.pattern, variant).items():
+        for key, text in paired_evidence(args.sweep, results).items():
             record_evidence(args.claim, key, Evidence(text, command), args.findings)
             print(f"{args.findings}: claim {args.claim}, {key}: {text}")
     return 0
