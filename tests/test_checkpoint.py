@@ -19,7 +19,7 @@ from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
-from depthq.evaluate.online import EvalConfig, evaluate
+from depthq.evaluate.online import EvalConfig, at_policy_rate, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, read_config
 from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
@@ -101,6 +101,13 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     meta = {p.key: p.value for p in onnx.load(c / "onnx" / "ckpt.onnx").metadata_props}
     assert json.loads(meta["depthq.frame_size"]) == [308, 410]
     assert json.loads(meta["depthq.actions"]) == [-1.0, 0.0, 1.0]
+    # The exported graph evaluates at the rate its metadata records, as the checkpoint does; --hz wins.
+    graph = f"onnx:{c / 'onnx' / 'ckpt.onnx'}"
+    assert at_policy_rate(EvalConfig(canyons=("eval:0",), decision_hz=10.0), graph).decision_hz == 10.0
+    assert main(["evaluate", graph, "--canyons", "eval:0", "--time-limit", "2", "--workers", "1",
+                 "--no-video", "--out", "eval-onnx"]) == 0
+    summary = read_json(c / "eval-onnx" / "summary.json")
+    assert summary["config"]["decision_hz"] == HZ and summary["runs"][0]["steps"] <= 2 * HZ
 
     assert main(["bench", "policy", "--policy", ckpt, "--decisions", "3", "--json"]) == 0
     assert json.loads(capsys.readouterr().out.splitlines()[-1])["policies"][0]["policy"] == "DQN:ckpt"

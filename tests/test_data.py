@@ -108,6 +108,21 @@ def test_short_runs_are_left_out(tmp_path: Path) -> None:
     assert len(arrays["frame_id"]) == 20 + 19 + 24
 
 
+def test_a_usable_run_keeps_a_depth_sample_in_what_is_stored_and_what_is_counted() -> None:
+    """min_frames >= horizon + 2, one rule for a collection's StorageConfig (the default horizon, 5) and
+    a training's SampleConfig (its own); each names its setting and the bad value."""
+    from depthq.data import StorageConfig
+    from depthq.data.samples import SampleConfig
+
+    StorageConfig(min_frames=7), SampleConfig(horizon=3, min_frames=5)  # the least each allows
+    with pytest.raises(ConfigError, match=r"^data\.min_frames must be an integer >= 7 .*, got 6$"):
+        StorageConfig(min_frames=6)
+    with pytest.raises(ConfigError, match=r"^data\.min_frames must be an integer >= 7 .*, got True$"):
+        StorageConfig(min_frames=True)
+    with pytest.raises(ConfigError, match=r"^min_frames must be an integer >= 5 .*, got 4$"):
+        SampleConfig(horizon=3, min_frames=4)
+
+
 # --- subsets ------------------------------------------------------------------------------------
 
 

@@ -88,13 +88,16 @@ def test_the_looks_report_says_not_yet_measured_for_what_is_missing(tmp_path: Pa
 
 def test_the_labeller_error_is_the_camera_labels_metric() -> None:
     """One function measures the labels (`depthq.data.stats.label_errors`): the report's cell is its
-    nearest-bin median [mean]."""
-    from depthq.data.stats import label_errors
-    from depthq.experiments.camera_labels import error_cell
+    nearest-bin median [mean], as `depthq dataset stats` writes it."""
+    from depthq.data.stats import error_cell, format_label_error, label_errors
 
     lidar = np.array([[1.0, 2.0], [0.5, np.nan]])
     errors = label_errors(lidar, lidar + 0.25, runs=1)
     assert error_cell(errors["nearest"]) == "0.250 [0.250]"
+    assert error_cell(errors["bands"][0]) == "–"  # no bin that near
+    report = {"labellers": [{"name": "floor", "fingerprint": "f" * 64}], "splits": {"val": errors}}
+    row = format_label_error(report)[2].split()
+    assert row[:5] == ["val", "1", "2", "0.250", "[0.250]"] and row[5] == "—"
 
 
 def test_the_looks_experiment_trains_with_its_pinned_configs() -> None:

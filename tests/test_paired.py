@@ -15,7 +15,7 @@ def test_paired_compares_the_networks_seed_by_seed_and_writes_the_claims_evidenc
     smoke: Path, tmp_path: Path
 ) -> None:
     # Paired by seed: the smoke run's own Table I, both networks at 3 and 6 runs (a seed 1 never ran).
-    table = paired.paired(smoke, (3, 6), (0, 1)).splitlines()
+    table = paired.paired(paired.paired_results(smoke, (3, 6), (0, 1))).splitlines()
     assert len(table) == 2 + 2 * len(paired.PAIRED)
     coll, depth = (json.loads((smoke / "eval" / f"{net}_n6_s0" / "summary.json").read_text())["summary"]
                    for net in ("coll", "depth"))

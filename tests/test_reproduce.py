@@ -70,6 +70,12 @@ def test_every_claim_and_deviation_of_the_report_points_at_an_existing_docs_page
     for d in findings.deviations:  # a deviation names its section, which must exist
         page, _, anchor = d.doc.partition("#")
         assert "{#" + anchor + "}" in (root / page).read_text(), d.doc
+    for c in findings.claims:  # so does each section a claim names ('docs/a.md#x and #y': both a.md's)
+        page = None
+        for named, anchor in re.findall(r"(docs/[\w/]+\.md)|#([\w-]+)", c.where):
+            page = named or page
+            if anchor:
+                assert page and "{#" + anchor + "}" in (root / page).read_text(), (c.id, page, anchor)
 
 
 def test_a_claims_evidence_is_written_and_read_back_and_bad_findings_are_refused(tmp_path: Path) -> None:

@@ -46,6 +46,17 @@ def _as_dict(value: Any) -> Any:
     return value
 
 
+def field_paths(record: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """{'samples': {'horizon': 5}} → {'samples.horizon': 5}: a record's settings by field path."""
+    out = {}
+    for key, value in record.items():
+        if isinstance(value, dict):
+            out.update(field_paths(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def _default(f: dataclasses.Field) -> Any:
     if f.default is not dataclasses.MISSING:
         return f.default

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from depthq.data.runfile import JPEG_QUALITY
-from depthq.data.samples import HORIZON, MIN_FRAMES, SampleConfig
+from depthq.data.samples import HORIZON, MIN_FRAMES, SampleConfig, check_min_frames
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
 
@@ -30,9 +30,7 @@ class StorageConfig:
     jpeg_quality: int = JPEG_QUALITY
 
     def __post_init__(self) -> None:
-        low = HORIZON + 2  # every counted run keeps a depth sample under the default targets
-        if isinstance(self.min_frames, bool) or not isinstance(self.min_frames, int) or self.min_frames < low:
-            raise ConfigError(f"data.min_frames must be an integer >= {low}, got {self.min_frames!r}")
+        check_min_frames(self.min_frames, HORIZON, "data.min_frames")  # under the default targets
         if not 1 <= self.jpeg_quality <= 95:
             raise ConfigError(
                 f"data.jpeg_quality must be in 1..95 (Pillow's useful range), got {self.jpeg_quality}"

@@ -57,11 +57,9 @@ class SampleConfig:
     action_lag: int = 0
 
     def __post_init__(self) -> None:
-        for name, low in (("horizon", 1), ("min_frames", self.horizon + 2)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                why = " (horizon + 2: every usable run keeps a depth sample)" if name == "min_frames" else ""
-                raise ConfigError(f"{name} must be an integer >= {low}{why}, got {value!r}")
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
+            raise ConfigError(f"horizon must be an integer >= 1, got {self.horizon!r}")
+        check_min_frames(self.min_frames, self.horizon)
         if not isinstance(self.every_run_end, bool):
             raise ConfigError(f"every_run_end must be true or false, got {self.every_run_end!r}")
         clip = self.action_clip
@@ -69,6 +67,15 @@ class SampleConfig:
             raise ConfigError(f"action_clip must be a finite number > 0 rad/s, got {clip!r}")
         if isinstance(self.action_lag, bool) or self.action_lag not in (0, 1):
             raise ConfigError(f"action_lag must be 0 or 1, got {self.action_lag!r}")
+
+
+def check_min_frames(min_frames: object, horizon: int, what: str = "min_frames") -> None:
+    """ConfigError naming `what` and its value unless `min_frames` is an integer >= `horizon` + 2, so
+    that every usable run keeps a depth sample."""
+    low = horizon + 2
+    if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < low:
+        raise ConfigError(f"{what} must be an integer >= {low} (horizon {horizon} + 2: every usable run "
+                          f"keeps a depth sample), got {min_frames!r}")
 
 
 def check_lookahead(target: str, lookahead: object, what: str = "lookahead") -> None:

@@ -152,11 +152,13 @@ def format_stats(stats: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def format_label_error(report: dict[str, Any]) -> list[str]:
-    """`label_error` as text lines: median [mean] absolute error in metres."""
-    def cell(summary: dict[str, float | None]) -> str:
-        return "—" if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
+def error_cell(summary: dict[str, float | None], missing: str = "–") -> str:
+    """An absolute error's 'median [mean]' (m) of `label_errors`; `missing` where it has no frame."""
+    return missing if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
 
+
+def format_label_error(report: dict[str, Any]) -> list[str]:
+    """`label_error` as text lines: median [mean] absolute error in metres ('—' for none)."""
     who = ", ".join(f"{lab['name']} {lab['fingerprint'][:12]}…" for lab in report["labellers"])
     first = next(iter(report["splits"].values()))
     bands = [b["band"] for b in first["bands"]]
@@ -166,8 +168,8 @@ def format_label_error(report: dict[str, Any]) -> list[str]:
         + " ".join(f"{band + ' m':>14}" for band in bands),
     ]
     for split, row in report["splits"].items():
-        lines.append(f"{split:>6} {row['runs']:>5} {row['frames']:>7} {cell(row['nearest']):>14} "
-                     + " ".join(f"{cell(b):>14}" for b in row["bands"]))
+        lines.append(f"{split:>6} {row['runs']:>5} {row['frames']:>7} {error_cell(row['nearest'], '—'):>14} "
+                     + " ".join(f"{error_cell(b, '—'):>14}" for b in row["bands"]))
     for split, row in report["splits"].items():
         lines.append(f"{split:>6} per bin, left to right (mean): "
                      + " ".join(f"{e:.2f}" for e in row["per_bin"]))

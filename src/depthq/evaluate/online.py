@@ -33,6 +33,7 @@ from depthq.host import host_fingerprint
 from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
+from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.registry import make_policy
 from depthq.policies.spec import PolicySpec
 from depthq.sim.canyon import (
@@ -76,7 +77,8 @@ class EvalConfig:
     seed: int = 0
     # A checkpoint's weights: best, last (= final), average or epoch:N; none: its own (`TrainConfig.weights`).
     weights: str | None = None
-    # Decisions (camera frames) per second; none: the rate a checkpoint records, else the default.
+    # Decisions (camera frames) per second; none: the rate a checkpoint or ONNX file records, else the
+    # default.
     decision_hz: float | None = None
     # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
     # the runs of --no-lockstep, which drives them one after the other.
@@ -135,11 +137,14 @@ def at_policy_rate(config: EvalConfig, policy_spec: str | PolicySpec) -> EvalCon
 
 
 def decision_rate(policy_spec: str | PolicySpec) -> float:
-    """The decision rate a checkpoint records (its training data's); the default for any other policy."""
-    checkpoint = PolicySpec.parse(policy_spec).checkpoint
-    if checkpoint is None:
+    """The decision rate a checkpoint or an exported graph records (its training data's); the default
+    for any other policy, and for a graph that records none (an older export)."""
+    spec = PolicySpec.parse(policy_spec)
+    if spec.kind == "onnx":  # the rate is in the graph's metadata (depthq.deploy.onnx_export)
+        return OnnxPolicy(spec.path, threads=1).decision_hz or DEFAULT_DECISION_HZ
+    if spec.checkpoint is None:
         return DEFAULT_DECISION_HZ
-    return policy_record(read_config(checkpoint)).decision_hz
+    return policy_record(read_config(spec.checkpoint)).decision_hz
 
 
 def default_canyons(policy_spec: str | PolicySpec) -> str:

@@ -50,7 +50,7 @@ import numpy as np
 from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, from_dict, read_json, to_dict, write_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
-from depthq.data.stats import ERROR_BANDS, stats_report
+from depthq.data.stats import ERROR_BANDS, error_cell, stats_report
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.flags import build_config
@@ -302,11 +302,6 @@ def error_cells(stats: dict[str, Any] | None) -> list[str]:
     if split is None:
         return ["–"] * (1 + len(ERROR_BANDS))
     return [error_cell(split["nearest"]), *(error_cell(b) for b in split["bands"])]
-
-
-def error_cell(summary: dict[str, float | None]) -> str:
-    """An absolute error's 'median [mean]' (m) of `depthq.data.stats.label_errors`; '–' for none."""
-    return "–" if summary["median"] is None else f"{summary['median']:.3f} [{summary['mean']:.3f}]"
 
 
 def read_stats(folder: Path) -> dict[str, Any] | None:

@@ -44,10 +44,10 @@ import numpy as np
 from PIL import Image, ImageDraw
 from tqdm import tqdm
 
-from depthq.configio import atomic_write_bytes, read_json, write_json
+from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
-from depthq.data.stats import label_errors
+from depthq.data.stats import error_cell, label_errors
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.experiments import camera_labels
@@ -62,6 +62,7 @@ from depthq.pipeline.sweep import Model, Settings, Sweep, parse_ints, retarget, 
 from depthq.report import html as page
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, mean_interval
+from depthq.report.paired import Summaries, by_seed
 from depthq.report.tables import markdown
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
@@ -116,12 +117,9 @@ PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller
 _GONE = object()
 
 
-def _flat(config: Any, prefix: str = "") -> dict[str, Any]:
+def _flat(config: Any) -> dict[str, Any]:
     """A config's fields by path ('samples.horizon'), JSON values; a training's "lr" its effective rate."""
-    values = json.loads(json.dumps(asdict(config))) if not isinstance(config, dict) else config
-    out: dict[str, Any] = {}
-    for key, value in values.items():
-        out.update(_flat(value, f"{prefix}{key}.") if isinstance(value, dict) else {prefix + key: value})
+    out = field_paths(json.loads(json.dumps(asdict(config))))
     if isinstance(config, TrainConfig):
         out["lr"] = config.learning_rate
     return out
@@ -210,23 +208,31 @@ def val_collect(preset: str, look: str, val_runs: int = VAL_RUNS) -> CollectConf
     return replace(sweep.collect, runs=1, val_runs=val_runs, seed=VAL_SEED)
 
 
-def labeller_error(labeller: Path, data: Path, split: str = "val", progress: bool = True) -> dict[str, Any]:
-    """The labeller in folder `labeller` measured on a dataset's `split` (its frames labelled in memory,
-    nothing written): `depthq.data.stats.label_errors` against the LiDAR's bins, and what was measured."""
-    loaded, dataset = load_labeller(labeller), Dataset.open(data)
-    check_applicable(loaded, dataset)
+def labeller_errors(labellers: list[Path], data: Path, split: str = "val", progress: bool = True
+                    ) -> list[dict[str, Any]]:
+    """The labellers in folders `labellers` measured on a dataset's `split`, each run decoded once for
+    all of them (its frames labelled in memory, nothing written): per labeller,
+    `depthq.data.stats.label_errors` against the LiDAR's bins, and what was measured."""
+    loaded, dataset = [load_labeller(folder) for folder in labellers], Dataset.open(data)
+    for labeller in loaded:
+        check_applicable(labeller, dataset)
     entries = dataset.entries(split)
     if not entries:
-        raise ConfigError(f"{data} has no {split} runs to measure the labeller {labeller} on")
-    lidar, camera = [], []
-    bar = tqdm(entries, desc=f"labeller on {Path(data).parent.name}", unit="run", disable=not progress)
+        raise ConfigError(f"{data} has no {split} runs to measure the labellers "
+                          f"{', '.join(map(str, labellers))} on")
+    lidar: list[np.ndarray] = []
+    camera: list[list[np.ndarray]] = [[] for _ in loaded]
+    bar = tqdm(entries, desc=f"labellers on {Path(data).parent.name}", unit="run", disable=not progress)
     for entry in bar:
         one = dataset.read_run(entry, images=True)
         lidar.append(one.bins)
-        camera.append(loaded.estimate(one))
-    return {"labeller": str(labeller), "name": loaded.record["name"], "fingerprint": loaded.fingerprint,
-            "data": str(data), "data_fingerprint": dataset.fingerprint(), "split": split,
-            **label_errors(np.concatenate(lidar), np.concatenate(camera), len(entries))}
+        for labels, labeller in zip(camera, loaded, strict=True):
+            labels.append(labeller.estimate(one))
+    bins, fingerprint = np.concatenate(lidar), dataset.fingerprint()
+    return [{"labeller": str(folder), "name": labeller.record["name"], "fingerprint": labeller.fingerprint,
+             "data": str(data), "data_fingerprint": fingerprint, "split": split,
+             **label_errors(bins, np.concatenate(labels), len(entries))}
+            for folder, labeller, labels in zip(labellers, loaded, camera, strict=True)]
 
 
 def error_path(out: Path, look: str, drive: str, method: str) -> Path:
@@ -237,19 +243,24 @@ def error_path(out: Path, look: str, drive: str, method: str) -> Path:
 def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], drive_looks: tuple[str, ...],
                       method: str, val_runs: int = VAL_RUNS, workers: int = 2, progress: bool = True) -> None:
     """Each driving look's validation set collected into OUT/val_<look>/data, and each training look's
-    labeller measured on it (resumed: a finished collection or measurement is kept)."""
+    labeller measured on it, its runs decoded once for them all (resumed: a finished collection or
+    measurement is kept)."""
     for drive in drive_looks:
         data, config = Path(out) / f"val_{drive}" / "data", val_collect(preset, drive, val_runs)
         if not collection_complete(data, config):
             print(f"validation runs in the {drive} look → {data}", flush=True)
             collect(data, config, workers=workers, progress=progress)
+        todo = {}  # labeller → where its error is kept, of those not measured yet
         for look in train_looks:
             labeller = Path(out) / look / "camera" / method / "labeller"
             path = error_path(out, look, drive, method)
-            if path.is_file() or not (labeller / LABELLER_CONFIG).is_file():
-                continue
-            print(f"labeller {labeller} in the {drive} look → {path}", flush=True)
-            write_json(path, labeller_error(labeller, data, progress=progress))
+            if not path.is_file() and (labeller / LABELLER_CONFIG).is_file():
+                print(f"labeller {labeller} in the {drive} look → {path}", flush=True)
+                todo[labeller] = path
+        if todo:
+            for path, record in zip(todo.values(), labeller_errors(list(todo), data, progress=progress),
+                                    strict=True):
+                write_json(path, record)
 
 
 def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
@@ -296,15 +307,14 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
     return 0
 
 
-def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]
-               ) -> dict[int, dict[str, Any]]:
+def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]) -> Summaries:
     """seed → evaluation summary of `net` trained in `look`, driven in `drive`, where it is written."""
     folder = Path(out) / look / f"eval_{drive}"
     found = {seed: evaluation_summary(folder / f"{net}_s{seed}") for seed in seeds}
     return {seed: summary for seed, summary in found.items() if summary is not None}
 
 
-def _d2c(found: dict[int, dict[str, Any]]) -> list[float]:
+def _d2c(found: Summaries) -> list[float]:
     return [float(s["distance_to_collision_mean"]) for s in found.values()]
 
 
@@ -356,18 +366,18 @@ def labeller_rows(out: Path, train_looks: tuple[str, ...] = TRAIN_LOOKS,
             path = error_path(out, look, drive, method)
             record = read_json(path) if path.is_file() else None
             row[f"{drive} val runs: nearest bin, m"] = (
-                f"{camera_labels.error_cell(record['nearest'])} ({record['frames']} frames)"
+                f"{error_cell(record['nearest'])} ({record['frames']} frames)"
                 if record else "–")
         rows.append(row)
     return rows
 
 
-def _paired(first: dict[int, dict[str, Any]], second: dict[int, dict[str, Any]]) -> tuple[str, list[float]]:
-    """second − first, paired by seed over the seeds both have: 'mean [95 % interval] (seeds)'."""
-    both = sorted(set(first) & set(second))
-    diff = [float(second[s]["distance_to_collision_mean"] - first[s]["distance_to_collision_mean"])
-            for s in both]
-    return (f"{mean_interval(diff, '+.2f')} (seeds {','.join(map(str, both))})" if diff else "–"), diff
+def _paired(first: Summaries, second: Summaries) -> tuple[str, list[float]]:
+    """second − first, m to the first collision paired by seed (`by_seed`): 'mean [95 % interval]
+    (seeds)', and the differences."""
+    pairs = by_seed(first, second)
+    text = f"{mean_interval(pairs.diff, '+.2f')} (seeds {','.join(map(str, pairs.seeds))})"
+    return (text if pairs.diff else "–"), pairs.diff
 
 
 def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COLOURS,
@@ -382,9 +392,9 @@ def transfer_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), flat: str = COL
         loss, _ = _paired(own, away)
         gain, _ = _paired(away, back)
         # the share over the seeds all three have, so the loss and the gain are of the same seeds
-        common = {s: own[s] for s in set(own) & set(away) & set(back)}
-        lost = _paired(common, {s: away[s] for s in common})[1]
-        gained = _paired({s: away[s] for s in common}, {s: back[s] for s in common})[1]
+        common = set(own) & set(away) & set(back)
+        lost = by_seed({s: own[s] for s in common}, away).diff
+        gained = by_seed({s: away[s] for s in common}, back).diff
         share = (f"{np.mean(gained) / -np.mean(lost):.0%}" if lost and np.mean(lost) < 0 else "–")
         rows.append({
             "Q-net": label,
@@ -408,9 +418,8 @@ def answers(out: Path, seeds: tuple[int, ...] = (0, 1, 2), randomised: str = TEX
     where = f"{Path(out) / randomised}/eval_…/*_s<seed>"
     first = f"Does the camera-label Depth-Q-Net trained {randomised} drive the {heldout} look at ≥ " \
             f"{DONE_SHARE:.0%} of its distance in the {randomised} look? "
-    both = sorted(set(camera) & set(own))
+    both, here, there, _ = by_seed(own, camera)
     if both:
-        there, here = ([float(d[s]["distance_to_collision_mean"]) for s in both] for d in (camera, own))
         share = np.mean(there) / np.mean(here)
         first += (f"**{'yes' if share >= DONE_SHARE else 'no'}**: {share:.0%} "
                   f"({mean_interval(there, '.2f')} m against {mean_interval(here, '.2f')} m, "

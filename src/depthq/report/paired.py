@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from depthq.configio import read_json
 from depthq.errors import ConfigError, guarded
@@ -26,26 +26,43 @@ PROG = "python -m depthq.report.paired"
 PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {net}_n{n}_s{seed}…)
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
+Summaries = dict[int, dict[str, Any]]  # seed → an evaluation's summary
+Results = dict[int, tuple[Summaries, Summaries]]  # size → (Coll-Q-Net's, Depth-Q-Net's) summaries
+
+
+class Pairs(NamedTuple):
+    """Two evaluations' values of one measure over the seeds both have, and the per-seed difference."""
+
+    seeds: list[int]  # in order
+    first: list[float]
+    second: list[float]
+    diff: list[float]  # second − first, seed by seed
+
+
+def by_seed(first: Summaries, second: Summaries, key: str = "distance_to_collision_mean") -> Pairs:
+    """`key` of the summaries of `first` and `second` paired by seed (networks trained on the same runs
+    with the same seed make their comparison a paired one): over the seeds both have."""
+    seeds = sorted(set(first) & set(second))
+    a, b = ([float(summaries[s][key]) for s in seeds] for summaries in (first, second))
+    return Pairs(seeds, a, b, [y - x for x, y in zip(a, b, strict=True)])
+
+
 def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-                   variant: Variant = ()) -> dict[int, dict[int, list[dict[str, Any]]]]:
-    """Per size, per seed with both networks evaluated: [Coll-Q-Net's, Depth-Q-Net's] summary; of the
-    sweep's models in `variant` (`depthq sweep --set`'s, one value each)."""
-    results: dict[int, dict[int, list[dict[str, Any]]]] = {}
+                   variant: Variant = ()) -> Results:
+    """Per size with a seed of both networks evaluated: (Coll-Q-Net's, Depth-Q-Net's) summaries of
+    the seeds both have, each read once. `pattern` names a model's evaluation folder under `sweep`;
+    `variant`: the sweep's models in it (`depthq sweep --set`'s, one value each)."""
+    results: Results = {}
     differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
     for n in sizes:
         for seed in seeds:
-            found = [evaluation_summary(Path(sweep) / pattern.format(
+            coll, depth = (evaluation_summary(Path(sweep) / pattern.format(
                 net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net])))
-                for net in ("coll", "depth")]
-            if all(found):
-                results.setdefault(n, {})[seed] = found
+                for net in ("coll", "depth"))
+            if coll and depth:
+                both = results.setdefault(n, ({}, {}))
+                both[0][seed], both[1][seed] = coll, depth
     return results
-
-
-def _columns(both: dict[int, list[dict[str, Any]]], key: str) -> tuple[list[float], ...]:
-    """Coll-Q-Net's and Depth-Q-Net's `key` per seed, and their difference (Depth − Coll)."""
-    coll, depth = ([float(s[i][key]) for s in both.values()] for i in (0, 1))
-    return coll, depth, [d - c for c, d in zip(coll, depth, strict=True)]
 
 
 def _sweep_train(sweep: Path) -> Settings:
@@ -61,33 +78,32 @@ def _sweep_train(sweep: Path) -> Settings:
     return tuple((k, setup[k]) for k in keys if setup.get(k) is not None)
 
 
-def paired(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], pattern: str = PATTERN,
-           variant: Variant = ()) -> str:
+def paired(results: Results) -> str:
     """Markdown: Depth-Q-Net against Coll-Q-Net trained on the same data with the same seed, per size
-    of a sweep folder: each network's mean [95 % interval] and the per-seed difference's (seeds
-    trained on the same runs make the comparison a paired one); sizes or seeds not evaluated are left
-    out of their row. `pattern` names a model's evaluation folder under `sweep`; `variant`: the
-    sweep's models in it."""
+    of a sweep folder (`paired_results`): each network's mean [95 % interval] and the per-seed
+    difference's (seeds trained on the same runs make the comparison a paired one); sizes or seeds
+    not evaluated are left out of their row."""
     lines = ["| runs | seeds | measure | Coll-Q-Net | Depth-Q-Net | Depth − Coll, paired by seed |",
              "|---|---|---|---|---|---|"]
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
+    for n, (coll, depth) in results.items():
         for label, key, fmt in PAIRED:
-            cells = [mean_interval(v, fmt) for v in _columns(both, key)]
-            lines.append(f"| {n} | {','.join(map(str, both))} | {label} | " + " | ".join(cells) + " |")
+            pairs = by_seed(coll, depth, key)
+            cells = [mean_interval(v, fmt) for v in (pairs.first, pairs.second, pairs.diff)]
+            lines.append(f"| {n} | {','.join(map(str, coll))} | {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
-def paired_evidence(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...],
-                    pattern: str = PATTERN, variant: Variant = ()) -> dict[str, str]:
-    """The paired comparison in words, one sentence per size, keyed by where it was measured
-    ('hard/eval, 4 Hz, 500 runs'): the report's evidence for a claim (docs/findings.json)."""
+def paired_evidence(sweep: Path, results: Results) -> dict[str, str]:
+    """The paired comparison of a sweep folder's `results` (`paired_results`) in words, one sentence
+    per size, keyed by where it was measured ('hard/eval, 4 Hz, 500 runs'): the report's evidence for
+    a claim (docs/findings.json)."""
     marker = Path(sweep) / "reproduce.json"
     if not marker.is_file():
         raise ConfigError(f"{sweep}: not a sweep folder (no reproduce.json), so it names no canyons to claim")
     record = read_json(marker)["sweep"]
     out = {}
-    for n, both in paired_results(sweep, sizes, seeds, pattern, variant).items():
-        coll, depth, diff = _columns(both, "distance_to_collision_mean")
+    for n, summaries in results.items():
+        _, coll, depth, diff = by_seed(*summaries)
         ahead = sum(d > 0 for d in diff)
         key = f"{record['canyons']}, {record['decision_hz']:g} Hz, {n} runs"
         out[key] = (f"to the first collision Depth-Q-Net {mean_interval(depth, '.2f')} m, Coll-Q-Net "
@@ -123,10 +139,11 @@ def main(argv: list[str] | None = None) -> int:
 def _act(args: argparse.Namespace, argv: list[str] | None) -> int:
     sizes, seeds = parse_ints(args.sizes, "--sizes"), parse_ints(args.seeds, "--seeds")
     variant = tuple((key, _one(key, values)) for key, values in map(parse_setting, args.set))
-    print(paired(args.sweep, sizes, seeds, args.pattern, variant))
+    results = paired_results(args.sweep, sizes, seeds, args.pattern, variant)  # the summaries read once
+    print(paired(results))
     if args.claim:
         command = f"{PROG} " + " ".join(argv or sys.argv[1:])
-        for key, text in paired_evidence(args.sweep, sizes, seeds, args.pattern, variant).items():
+        for key, text in paired_evidence(args.sweep, results).items():
             record_evidence(args.claim, key, Evidence(text, command), args.findings)
             print(f"{args.findings}: claim {args.claim}, {key}: {text}")
     return 0

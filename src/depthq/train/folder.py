@@ -44,7 +44,7 @@ import torch
 from safetensors import SafetensorError, safe_open
 from torch.optim.swa_utils import AveragedModel
 
-from depthq.configio import atomic_write_bytes, to_dict, write_json
+from depthq.configio import atomic_write_bytes, field_paths, to_dict, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
@@ -103,23 +103,12 @@ def settings_differing(record: dict[str, Any], config: TrainConfig) -> list[str]
     """The settings in which checkpoint `record` (`read_config`) was trained otherwise than `config`
     asks, but for `epochs`, `data` and `snapshots`; [] for the same training."""
     ignore = {"epochs", "data", "snapshots"}
-    old_train = {k: v for k, v in _paths(record.get("train", {})).items() if k not in ignore}
-    new_train = {k: v for k, v in _paths(to_dict(config)).items() if k not in ignore}
+    old_train = {k: v for k, v in field_paths(record.get("train", {})).items() if k not in ignore}
+    new_train = {k: v for k, v in field_paths(to_dict(config)).items() if k not in ignore}
     differing = sorted(k for k in set(old_train) | set(new_train) if old_train.get(k) != new_train.get(k))
     if record.get("learning_rate") != config.learning_rate:  # lr None: a default that may have changed
         differing.append("learning_rate (the default for this model changed)")
     return differing
-
-
-def _paths(record: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    """{'samples': {'horizon': 5}} → {'samples.horizon': 5}: a record's settings by field path."""
-    out = {}
-    for key, value in record.items():
-        if isinstance(value, dict):
-            out.update(_paths(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 def check_folder(out: Path, config: TrainConfig, fingerprint: str) -> bool:
