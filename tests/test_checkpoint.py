@@ -19,7 +19,7 @@ from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
-from depthq.evaluate.online import EvalConfig, at_policy_rate, evaluate
+from depthq.evaluate.online import EvalConfig, at_policy_rate, default_canyons, evaluate
 from depthq.nets.checkpoint import FORMAT_VERSION, read_config
 from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
@@ -77,8 +77,10 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     b.mkdir()
     shutil.move(a / "ckpt", b / "ckpt")
     shutil.rmtree(a / "data")
-    # As if trained on 5 Hz data: what a policy drives at must come from the checkpoint.
+    # As if trained on 5 Hz data of the hard family: what a policy drives at, and where by default,
+    # must come from the checkpoint.
     record["policy"]["decision_hz"] = HZ = 5.0
+    record["dataset"]["env"]["world"]["family"] = "hard"
     (b / "ckpt" / "config.json").write_text(json.dumps(unchecked(record)))
     ckpt = str(b / "ckpt")
     c.mkdir()
@@ -104,6 +106,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     # The exported graph evaluates at the rate its metadata records, as the checkpoint does; --hz wins.
     graph = f"onnx:{c / 'onnx' / 'ckpt.onnx'}"
     assert at_policy_rate(EvalConfig(canyons=("eval:0",), decision_hz=10.0), graph).decision_hz == 10.0
+    assert default_canyons(graph) == default_canyons(ckpt) == "hard/eval"  # its data's family
     assert main(["evaluate", graph, "--canyons", "eval:0", "--time-limit", "2", "--workers", "1",
                  "--no-video", "--out", "eval-onnx"]) == 0
     summary = read_json(c / "eval-onnx" / "summary.json")

@@ -148,12 +148,15 @@ def decision_rate(policy_spec: str | PolicySpec) -> float:
 
 
 def default_canyons(policy_spec: str | PolicySpec) -> str:
-    """The evaluation canyons of the family a checkpoint's data was collected in ('eval' for the
-    paper's, 'hard/eval', ...); the paper's for any other policy and for a robot's recording."""
-    checkpoint = PolicySpec.parse(policy_spec).checkpoint
-    if checkpoint is None:
+    """The evaluation canyons of the family a checkpoint's or an exported graph's data was collected in
+    ('eval' for the paper's, 'hard/eval', ...); the paper's for any other policy and for a robot's
+    recording."""
+    spec = PolicySpec.parse(policy_spec)
+    if spec.kind == "onnx":
+        return eval_set(OnnxPolicy(spec.path, threads=1).family or PAPER)
+    if spec.checkpoint is None:
         return "eval"
-    env = dataset_record(read_config(checkpoint)).env or {}
+    env = dataset_record(read_config(spec.checkpoint)).env or {}
     return eval_set(env.get("world", {}).get("family", PAPER))
 
 

@@ -52,6 +52,8 @@ class OnnxPolicy(GreedyPolicy):
             # The rate its training data was collected at (a robot decides at it); None: not recorded.
             record = json.loads(meta.get("depthq.config", "{}"))
             self.decision_hz = float(record["policy"]["decision_hz"]) if "policy" in record else None
+            # The canyon family of its training data; None: a robot's recording or an older export.
+            self.family = ((record.get("dataset") or {}).get("env") or {}).get("world", {}).get("family")
         except (KeyError, ValueError, TypeError) as err:
             raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
         self.network = get_network(kind)
