@@ -1,0 +1,214 @@
+"""The default head's size, measured on `val` canyons (docs/benchmarks.md#head-size).
+
+Each network is trained at every hidden width, Depth-Q-Net also at every epoch budget (its weight
+average over the last quarter of them; Coll-Q-Net acts with its best epoch, so its budget stays), on
+200 and 500 runs of the hard and of the paper family with 2 seeds, and driven in 20 `val` canyons of
+its family. Every variant is compared with the reference (4096 wide, 40 epochs) paired by family,
+size and seed; the cheapest variant that drives as far (its mean paired difference no worse than minus
+the reference's spread between seeds) is the one to make the default.
+
+    python -m depthq.experiments.sizing run OUT       # the four sweeps, resumed when rerun
+    python -m depthq.experiments.sizing report OUT    # OUT/report.md and OUT/sizing.json
+
+OUT/<family>-<net>/ is a `depthq sweep` folder (the Coll-Q-Net sweeps read the Depth-Q-Net sweeps'
+data through a symlink). The reference width is pinned, so the folders keep their names when the
+default changes. Nothing here pins cores (the caller's `taskset` does).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from depthq.configio import atomic_write_bytes, read_json, write_json
+from depthq.errors import ConfigError, guarded
+from depthq.nets.checkpoint import read_config
+from depthq.pipeline.presets import get_preset
+from depthq.pipeline.runner import run_sweep
+from depthq.pipeline.sweep import Sweep, retarget, widened
+from depthq.report.build import build_report
+from depthq.report.cells import mean_interval
+from depthq.report.tables import interval, markdown
+
+PROG = "python -m depthq.experiments.sizing"
+CANYONS = {"hard": "hard/val:1000-1019", "paper": "val:1000-1019"}  # the choice canyons of each family
+NETS = ("depth", "coll")
+WIDTHS = (512, 1024, 2048, 4096)
+EPOCHS = {"depth": (20, 30, 40), "coll": ()}  # (): the trainer's default budget only
+REFERENCE = (4096, 40)  # hidden width, epochs: the default before this measurement
+RUNS, SIZES, SEEDS = 500, (200, 500), (0, 1)
+
+
+def sweep(family: str, net: str) -> Sweep:
+    """The sweep of one family and network, as `depthq sweep --preset FAMILY --runs 500 --sizes 200,500
+    --seeds 0,1 --canyons CANYONS --nets NET --set hidden=… [--set epochs=…]` builds it, its reference
+    width pinned."""
+    grid = (("hidden", WIDTHS),) + ((("epochs", EPOCHS[net]),) if EPOCHS[net] else ())
+    base = get_preset(family)
+    target = retarget(base, None, CANYONS[family], None, None)
+    pinned = widened(target, RUNS, name=f"{base.name} sweep", seeds=SEEDS, subsets=SIZES, nets=(net,),
+                     grid=grid)
+    return widened(pinned, train=(*pinned.train, ("hidden", REFERENCE[0])))
+
+
+def run(out: Path, device: str = "auto") -> None:
+    """Every family's Depth-Q-Net sweep, then its Coll-Q-Net sweep on the same data."""
+    for net in NETS:
+        for family in CANYONS:
+            folder = out / f"{family}-{net}"
+            if net != NETS[0] and not (folder / "data").exists():
+                folder.mkdir(parents=True, exist_ok=True)
+                (folder / "data").symlink_to((out / f"{family}-{NETS[0]}" / "data").resolve())
+            run_sweep(sweep(family, net), folder, device=device, finish=build_report)
+
+
+@dataclass(frozen=True)
+class Point:
+    """One trained model driven in its family's choice canyons."""
+
+    family: str
+    net: str
+    runs: int
+    seed: int
+    hidden: int
+    epochs: int
+    distance: float  # mean m to the first collision over the canyons
+    ends: int  # canyons whose end it reached
+    epoch_s: float  # median seconds of a training epoch (as trained: one core, maybe beside other work)
+
+    @property
+    def variant(self) -> tuple[str, int, int]:
+        return self.net, self.hidden, self.epochs
+
+    @property
+    def cell(self) -> tuple[str, int, int]:
+        return self.family, self.runs, self.seed
+
+
+def points(out: Path) -> list[Point]:
+    """Every model of OUT's sweeps that has been driven, its settings read from its checkpoint."""
+    found = []
+    for summary_file in sorted(out.glob("*-*/eval/*/summary.json")):
+        model = summary_file.parent.parent.parent / "models" / summary_file.parent.name
+        if not (model / "config.json").is_file():
+            continue  # a reference policy's evaluation (heuristic, OU)
+        config, summary = read_config(model), read_json(summary_file)["summary"]
+        with (model / "metrics.csv").open() as f:
+            seconds = [float(row["seconds"]) for row in csv.DictReader(f)]
+        train = config["train"]
+        found.append(Point(config["dataset"]["env"]["world"]["family"], train["model"], int(train["runs"]),
+                           int(train["seed"]), int(config["head"]["hidden"]), int(train["epochs"]),
+                           float(summary["distance_to_collision_mean"]), int(summary["reached_end"]),
+                           float(np.median(seconds))))
+    return found
+
+
+def seed_spread(reference: list[Point]) -> float | None:
+    """The reference's standard deviation between seeds, pooled over its (family, size) cells."""
+    cells: dict[tuple[str, int], list[float]] = {}
+    for p in reference:
+        cells.setdefault((p.family, p.runs), []).append(p.distance)
+    variances = [np.var(v, ddof=1) for v in cells.values() if len(v) > 1]
+    return float(np.sqrt(np.mean(variances))) if variances else None
+
+
+def compare(found: list[Point]) -> list[dict[str, object]]:
+    """Per variant: its distance per family and size (mean over seeds), its paired difference from the
+    reference of its network (mean and 95 % interval over the cells both hold), whether it drives as
+    far, and its cost (width × epochs, and the measured seconds per epoch)."""
+    by_variant: dict[tuple[str, int, int], dict[tuple[str, int, int], Point]] = {}
+    for p in found:
+        by_variant.setdefault(p.variant, {})[p.cell] = p
+    rows = []
+    for (net, hidden, epochs), cells in sorted(by_variant.items(), key=lambda kv: _cost(*kv[0])):
+        reference = by_variant.get((net, *REFERENCE), {})
+        spread = seed_spread(list(reference.values()))
+        shared = sorted(set(cells) & set(reference))
+        diffs = [cells[c].distance - reference[c].distance for c in shared]
+        complete = len(shared) == len(CANYONS) * len(SIZES) * len(SEEDS)
+        as_far = None if not complete or spread is None else bool(np.mean(diffs) >= -spread)
+        rows.append({
+            "net": net, "hidden": hidden, "epochs": epochs,
+            "distance": {f"{f}/{n}": [cells[c].distance for c in sorted(cells) if c[:2] == (f, n)]
+                         for f in CANYONS for n in SIZES},
+            "difference": float(np.mean(diffs)) if diffs else None,
+            "interval": interval(diffs), "pairs": len(shared), "spread": spread, "as_far": as_far,
+            "epoch_s": float(np.median([p.epoch_s for p in cells.values()])),
+        })
+    return rows
+
+
+def _cost(net: str, hidden: int, epochs: int) -> tuple[str, int, int]:
+    """The order of variants: by network, then the training's work (width × epochs), then width."""
+    return net, hidden * epochs, hidden
+
+
+def choice(rows: list[dict[str, object]], net: str) -> dict[str, object] | None:
+    """The cheapest variant of `net` that drives as far as its reference; None until all are measured."""
+    mine = [r for r in rows if r["net"] == net]
+    if not mine or any(r["as_far"] is None for r in mine):
+        return None
+    return min((r for r in mine if r["as_far"]), key=lambda r: _cost(net, int(r["hidden"]), int(r["epochs"])))
+
+
+def _difference(mean: float | None, ci: tuple[float, float] | None) -> str:
+    if mean is None:
+        return "–"
+    return f"{mean:+.2f}" + ("" if ci is None else f" [{ci[0]:+.2f}, {ci[1]:+.2f}]")
+
+
+def report(out: Path) -> str:
+    """OUT/report.md (and the same as OUT/sizing.json): one row per variant, and each network's choice."""
+    rows = compare(points(out))
+    head = ["network", "hidden", "epochs", *(f"{f} val, {n} runs: m" for f in CANYONS for n in SIZES),
+            "paired difference from 4096/40: m", "pairs", "as far", "s/epoch"]
+    body = [[r["net"], r["hidden"], r["epochs"],
+             *(mean_interval(v, ".2f") for v in r["distance"].values()),
+             _difference(r["difference"], r["interval"]),
+             r["pairs"], {None: "not yet", True: "yes", False: "no"}[r["as_far"]], f"{r['epoch_s']:.2f}"]
+            for r in rows]
+    table = markdown([dict(zip(head, map(str, cells), strict=True)) for cells in body])
+    lines = ["# The default head's size, on val canyons", "", table]
+    for net in NETS:
+        chosen = choice(rows, net)
+        spread = next((r["spread"] for r in rows if r["net"] == net and r["spread"] is not None), None)
+        spread_text = "not yet measured" if spread is None else f"{spread:.2f} m"
+        chosen_text = ("not yet measured" if chosen is None
+                       else f"{chosen['hidden']} wide, {chosen['epochs']} epochs")
+        lines.append(f"- {net}: the reference's spread between seeds {spread_text}; "
+                     f"the cheapest that drives as far: {chosen_text}")
+    text = "\n".join(lines) + "\n"
+    atomic_write_bytes(out / "report.md", text.encode())
+    write_json(out / "sizing.json", {"rows": rows, "choices": {n: choice(rows, n) for n in NETS},
+                                     "points": [asdict(p) for p in points(out)]})
+    return text
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
+    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    go = actions.add_parser("run", help="the four sweeps (resumed)")
+    go.add_argument("out", type=Path, help="the experiment's folder (created; resumed)")
+    go.add_argument("--device", default="auto", help="torch device (default: auto)")
+    rep = actions.add_parser("report", help="OUT/report.md and OUT/sizing.json from what OUT holds")
+    rep.add_argument("out", type=Path, help="the experiment's folder")
+    args = parser.parse_args(argv)
+
+    def work() -> int:
+        if args.action == "run":
+            run(args.out, args.device)
+        elif not args.out.is_dir():
+            raise ConfigError(f"{args.out}: no such experiment folder")
+        print(report(args.out))
+        return 0
+
+    return guarded(PROG, work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
