@@ -250,6 +250,14 @@ def test_benches_measure_each_precision(data: Path, capsys: pytest.CaptureFixtur
         forms["concat/fp32"]["head_gflops"] / forms["concat/fp32"]["samples_per_s"])
     assert main(["bench", "train", "--head-form", "dueling", "--seconds", "1"]) == 2
     assert "dueling" in capsys.readouterr().err
+    # Widths side by side: a narrower head does less work per sample, against the same matmul.
+    widths = bench("train", "--hidden", "1024,4096", "--seconds", "1", "--threads", "1")["variants"]
+    assert list(widths) == ["depth_first/fp32/1024", "depth_first/fp32/4096"]
+    narrow, wide = widths.values()
+    assert narrow["head_gflops"] / narrow["samples_per_s"] < wide["head_gflops"] / wide["samples_per_s"] / 3
+    for bad in ("0", "wide"):
+        assert main(["bench", "train", "--hidden", bad, "--seconds", "1"]) == 2
+        assert bad in capsys.readouterr().err
     result = bench("features", "--data", str(data), "--frames", "32", "--precision", "bf16,fp32")
     assert list(result["precisions"]) == ["bf16", "fp32"]
     assert all(p["frames"] == 32 and p["frames_per_s"] > 0 for p in result["precisions"].values())

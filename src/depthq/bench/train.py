@@ -22,18 +22,21 @@ from depthq.train.trainer import train_step
 
 BATCH = 64
 POOL = 8192  # cached-feature-like rows to draw batches from
+ROOFLINE_HIDDEN = 4096  # the GEMM the ratios are taken against: 1281 × 4096, whatever the heads' widths
 
 
 def bench_train(
     seconds: float = 10.0, device: str = "auto", precisions: tuple[str, ...] = ("fp32",),
     threads: int | None = None, forms: tuple[str | None, ...] = (None,),
+    hiddens: tuple[int | None, ...] = (None,),
 ) -> dict:
-    """Depth-Q-Net head training samples/s (batch 64, 1280-d features, 4096 hidden, Adadelta) and its
-    FLOP/s as a fraction of what fp32 `torch.matmul` reaches on a 1281 × 4096 GEMM in the same run,
-    for each head form of `forms` (`TrainConfig.head_form`; None: the default) and each of
-    `precisions` (`TrainConfig.precision`), their rounds interleaved so that all see the same machine
-    load; `threads` None: this process's cores. The first variant's figures are also the result's own
-    keys; `variants` holds each as "FORM/PRECISION".
+    """Depth-Q-Net head training samples/s (batch 64, 1280-d features, Adadelta) and its FLOP/s as a
+    fraction of what fp32 `torch.matmul` reaches on a 1281 × 4096 GEMM in the same run, for each head
+    form of `forms` (`TrainConfig.head_form`; None: the default), each hidden width of `hiddens`
+    (`TrainConfig.hidden`; None: the default) and each of `precisions` (`TrainConfig.precision`), their
+    rounds interleaved so that all see the same machine load; `threads` None: this process's cores. The
+    first variant's figures are also the result's own keys; `variants` holds each as "FORM/PRECISION",
+    with "/HIDDEN" after it when widths are given.
 
     Head FLOPs per sample follow the usual 3 × forward convention (`ratio`); a layer fed data (the
     feature, a depth-first head's true current bins) needs no input gradient, so `ratio_actual`
@@ -44,14 +47,17 @@ def bench_train(
     torch.set_num_threads(threads or cores())
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
-    configs = {form: TrainConfig(model="depth", data="-", head_form=form) for form in dict.fromkeys(forms)}
-    variants = [(config, precision) for config in configs.values() for precision in precisions]
-    names = [f"{config.head_form}/{precision}" for config, precision in variants]
+    widths = [{} if hidden is None else {"hidden": hidden} for hidden in dict.fromkeys(hiddens)]
+    configs = [TrainConfig(model="depth", data="-", head_form=form, **width)
+               for form in dict.fromkeys(forms) for width in widths]
+    variants = [(config, precision) for config in configs for precision in precisions]
+    names = [f"{config.head_form}/{precision}" + ("" if hiddens == (None,) else f"/{config.hidden}")
+             for config, precision in variants]
     models = {name: QNet(build_trunk(config.trunk, pretrained=False), build_head(config.head())).to(where)
               for name, (config, _) in zip(names, variants, strict=True)}
     optimizers = {name: make_optimizer(models[name], config.learning_rate, config.weight_decay)
                   for name, (config, _) in zip(names, variants, strict=True)}
-    head = next(iter(configs.values())).head()
+    head = configs[0].head()
     rng = np.random.default_rng(0)
     arrays = {
         "run_offsets": np.array([0, POOL]),
@@ -64,7 +70,7 @@ def bench_train(
     features = rng.uniform(0, 6, (POOL, head.feature_dim)).astype(np.float16)
     samples = FeatureSamples(arrays, FeatureTable(features, {"train_000000": (0, POOL)}, False), "train")
     x = torch.rand(BATCH, head.feature_dim + 1, device=where)
-    w = torch.rand(head.feature_dim + 1, head.hidden, device=where)
+    w = torch.rand(head.feature_dim + 1, ROOFLINE_HIDDEN, device=where)
 
     def head_step(name: str, precision: str) -> None:
         batch = samples.batch(samples.draw(BATCH, rng)).to(where)
@@ -90,7 +96,7 @@ def bench_train(
             head_n[name], head_s[name] = head_n[name] + n, head_s[name] + dt
         n, dt = _timed(matmul, 0.25 * seconds / rounds)
         matmul_n, matmul_s = matmul_n + n, matmul_s + dt
-    matmul_flops = matmul_n * 2 * BATCH * (head.feature_dim + 1) * head.hidden / matmul_s
+    matmul_flops = matmul_n * 2 * BATCH * (head.feature_dim + 1) * ROOFLINE_HIDDEN / matmul_s
     each = {}
     for name in names:
         forward, actual = _step_flops(models[name].head)

@@ -37,6 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     tr.add_argument("--head-form", default=None,
                     help="Depth-Q-Net head forms measured side by side, comma-separated, e.g. "
                          "depth_first,concat (train --head-form; default: the default head's)")
+    tr.add_argument("--hidden", default=None,
+                    help="hidden widths measured side by side, comma-separated, e.g. 1024,4096 (train "
+                         "--hidden; default: the default head's)")
     pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
     pol.add_argument(
         "--policy", action="append", default=None,
@@ -151,8 +154,9 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             _positive("--threads", args.threads)
         precisions = _precisions(args.precision)
         forms = (None,) if args.head_form is None else tuple(args.head_form.split(","))
+        hiddens = (None,) if args.hidden is None else _widths(args.hidden)
         r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads,
-                        forms=forms)
+                        forms=forms, hiddens=hiddens)
         each = [f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's"
                 + (f" ({name})" if len(r["variants"]) > 1 else "") for name, p in r["variants"].items()]
         return r, "; ".join(each) + f" {r['matmul_gflops']} fp32 GFLOP/s ({r['threads']} threads)"
@@ -221,3 +225,11 @@ def run(args: argparse.Namespace) -> int:
     result, figure = _measure(args)
     print(json.dumps(result) if args.json else figure)
     return 0
+
+
+def _widths(text: str) -> tuple[int, ...]:
+    """'1024,4096' → (1024, 4096); each is checked as `train --hidden` checks it."""
+    try:
+        return tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--hidden takes widths such as 1024,4096; got {text!r}") from None
