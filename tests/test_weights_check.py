@@ -4,13 +4,24 @@ driven; bad input named before any work."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
 
 from depthq.configio import read_json
 from depthq.errors import ConfigError
+from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
 from depthq.experiments import weights_check
+from depthq.nets.checkpoint import (
+    AVERAGE_TOLERANCE_SE,
+    average_fails,
+    chosen_weights,
+    read_config,
+    read_sidecar,
+    write_sidecar,
+)
+from depthq.policies.qnet import QNetPolicy
 
 
 def test_each_weights_choice_is_looked_at_and_driven(toy_nets: dict[str, Path], tmp_path: Path,
@@ -63,3 +74,32 @@ def test_bad_input_is_named_before_any_work(toy_nets: dict[str, Path], tmp_path:
         assert weights_check.main(argv) == 2
         assert named in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_a_weight_average_that_fails_its_check_is_not_acted_with(toy_nets: dict[str, Path],
+                                                                  tmp_path: Path) -> None:
+    folder = tmp_path / "depth"
+    shutil.copytree(toy_nets["depth"], folder)
+    config = read_config(folder)
+    assert config["train"]["weights"] == "average" and not average_fails(folder, config)
+    assert QNetPolicy.from_checkpoint(folder).weights == "average"
+    driven = tmp_path / "eval"
+    evaluate(str(folder), driven, EvalConfig(canyons=("val:1000",), time_limit_s=1.0), workers=1,
+             progress=False, video=False)
+    assert evaluation_done(driven)
+
+    # Its validation loss worse than the final weights' by more than the tolerance: the final act.
+    final, average = read_sidecar(folder, "last"), read_sidecar(folder, "average")
+    samples = config["train"]["val_batches"] * config["train"]["batch_size"]
+    error = ((average["val_loss_std"] ** 2 + final["val_loss_std"] ** 2) / samples) ** 0.5
+    for z, fails in ((AVERAGE_TOLERANCE_SE - 0.1, False), (AVERAGE_TOLERANCE_SE + 0.1, True)):
+        write_sidecar(folder, "average", {**average, "val_loss": final["val_loss"] + z * error})
+        assert average_fails(folder, config) is fails
+    assert chosen_weights(config, None, folder) == "final"
+    assert chosen_weights(config, "average", folder) == "average"
+    assert QNetPolicy.from_checkpoint(folder).weights == "last"
+    assert QNetPolicy.from_checkpoint(folder, weights="average").weights == "average"  # asked for: given
+    assert not evaluation_done(driven)  # driven with the average: to drive again
+    evaluate(str(folder), driven, EvalConfig(canyons=("val:1000",), time_limit_s=1.0), workers=1,
+             progress=False, video=False)
+    assert evaluation_done(driven) and read_json(driven / "summary.json")["policy"]["weights"] == "last"

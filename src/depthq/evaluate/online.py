@@ -20,7 +20,15 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, check_seed, provenance, to_dict, write_json
+from depthq.configio import (
+    OMIT_DEFAULT,
+    atomic_write_bytes,
+    check_seed,
+    provenance,
+    read_json,
+    to_dict,
+    write_json,
+)
 from depthq.control.action_selection import DEPTH_RULES, Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.errors import ConfigError
@@ -30,7 +38,14 @@ from depthq.evaluate.metrics import summarize
 from depthq.evaluate.run_record import FIG4_EVERY, RunRecord
 from depthq.evaluate.video import write_video
 from depthq.host import host_fingerprint
-from depthq.nets.checkpoint import dataset_record, policy_record, read_config, weights_stem
+from depthq.nets.checkpoint import (
+    CONFIG,
+    chosen_weights,
+    dataset_record,
+    policy_record,
+    read_config,
+    weights_stem,
+)
 from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
 from depthq.policies.onnx import OnnxPolicy
@@ -63,6 +78,8 @@ RUN_FIELDS = (
     "closest",
     "canyon_length",
 )
+
+SUMMARY = "summary.json"  # written last: a folder with it holds a finished evaluation
 
 
 @dataclass(frozen=True)
@@ -325,6 +342,7 @@ def evaluate(
         executor.check_shared(policy_spec.checkpoint)
         dataset = training_data(read_config(policy_spec.checkpoint), data)
     config = at_policy_rate(config, policy_spec)
+    (Path(out) / SUMMARY).unlink(missing_ok=True)  # an evaluation redone reads as not done until it is
     start = time.perf_counter()
     ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None
@@ -345,6 +363,22 @@ def evaluate(
     }
     _write(out, summary, ordered, video_fps=config.env.world.decision_hz)
     return summary
+
+
+def evaluation_done(folder: Path) -> bool:
+    """Whether `folder` holds a finished evaluation (its summary.json) of its policy as the policy acts
+    now: a checkpoint evaluated with its own default weights must have been driven with the weights it
+    chooses today (`depthq.nets.checkpoint.chosen_weights`: a weight average that fails its check acts
+    with the final weights)."""
+    path = Path(folder) / SUMMARY
+    if not path.is_file():
+        return False
+    summary = read_json(path)
+    checkpoint = Path(summary["policy"].get("checkpoint") or "-")
+    if summary["config"].get("weights") is not None or not (checkpoint / CONFIG).is_file():
+        return True  # weights chosen explicitly, or not a checkpoint (or no longer there to ask)
+    acts = weights_stem(chosen_weights(read_config(checkpoint), None, checkpoint))
+    return summary["policy"]["weights"] == acts
 
 
 def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float) -> None:
@@ -368,4 +402,4 @@ def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video
         plot_fig4(snaps, runs[0], summary["policy"], out / "fig4_qualitative.png")
     if runs[0]["video"]:
         write_video(runs[0]["video"], runs[0], summary["policy"], out / "video.mp4", video_fps)
-    write_json(out / "summary.json", summary)
+    write_json(out / SUMMARY, summary)

@@ -52,7 +52,7 @@ from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.stats import ERROR_BANDS, error_cell, stats_report
 from depthq.errors import ConfigError, guarded
-from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import SUMMARY, EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.flags import build_config
 from depthq.labellers.labeller import (
     CAMERA_METHODS,
@@ -81,7 +81,6 @@ SETUP = "setup.json"
 LIDAR = "lidar"  # OUT/lidar/eval: the sweep's own models, trained on the LiDAR's bins and the bump
 REFERENCES = ("depth", "coll")  # the sweep's networks each camera-label Depth-Q-Net is compared with
 CRITERION = 0.8  # issue #32: the camera-label net drives ≥ 80 % of the LiDAR-label net's distance
-SUMMARY = "summary.json"
 # The labeller settings `run` sets itself: not for --labeller-set.
 LABELLER_OWN = ("data", "method")
 
@@ -199,8 +198,8 @@ def camera_config(setup: Setup, data: Path, runs: int, seed: int,
 
 def evaluate_once(checkpoint: Path, folder: Path, setup: Setup, workers: int, device: str, progress: bool
                   ) -> None:
-    """`checkpoint` driven in the setup's canyons into `folder`, unless its summary.json exists."""
-    if (folder / SUMMARY).is_file():
+    """`checkpoint` driven in the setup's canyons into `folder`, unless done (`evaluation_done`)."""
+    if evaluation_done(folder):
         return
     print(f"evaluate {checkpoint} in {setup.canyons} → {folder}", flush=True)
     evaluate(str(checkpoint), folder, setup.eval_config(), workers=workers, progress=progress,

@@ -49,7 +49,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.data.stats import error_cell, label_errors
 from depthq.errors import ConfigError, guarded
-from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.experiments import camera_labels
 from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
@@ -297,7 +297,7 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
             for seed in seeds:
                 for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
                     folder = out / look / f"eval_{drive}" / f"{net}_s{seed}"
-                    if (folder / "summary.json").is_file() or not (checkpoint / CONFIG).is_file():
+                    if not (checkpoint / CONFIG).is_file() or evaluation_done(folder):
                         continue
                     print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
                     evaluate(str(checkpoint), folder, config, workers=workers, progress=progress,

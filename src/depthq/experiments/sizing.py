@@ -27,6 +27,7 @@ import numpy as np
 
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError, guarded
+from depthq.evaluate.online import evaluation_done
 from depthq.nets.checkpoint import read_config
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
@@ -57,7 +58,8 @@ def sweep(family: str, net: str) -> Sweep:
 
 
 def run(out: Path, device: str = "auto") -> None:
-    """Every family's Depth-Q-Net sweep, then its Coll-Q-Net sweep on the same data."""
+    """Every family's Depth-Q-Net sweep, then its Coll-Q-Net sweep on the same data (a resumed sweep
+    also drives again what was driven with weights its checkpoint no longer acts with)."""
     for net in NETS:
         for family in CANYONS:
             folder = out / f"{family}-{net}"
@@ -95,8 +97,8 @@ def points(out: Path) -> list[Point]:
     found = []
     for summary_file in sorted(out.glob("*-*/eval/*/summary.json")):
         model = summary_file.parent.parent.parent / "models" / summary_file.parent.name
-        if not (model / "config.json").is_file():
-            continue  # a reference policy's evaluation (heuristic, OU)
+        if not (model / "config.json").is_file() or not evaluation_done(summary_file.parent):
+            continue  # a reference policy's evaluation (heuristic, OU), or one to drive again
         config, summary = read_config(model), read_json(summary_file)["summary"]
         with (model / "metrics.csv").open() as f:
             seconds = [float(row["seconds"]) for row in csv.DictReader(f)]

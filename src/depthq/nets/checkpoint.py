@@ -71,6 +71,10 @@ FORMAT = "depthq-checkpoint"
 FORMAT_VERSION = 3
 # TrainConfig.weights: the weights a checkpoint's policy uses by default
 WEIGHTS = ("best", "final", "average")
+# A weight average worse than the final weights on validation by more than this many standard errors
+# is not acted with by default (`average_fails`): 3.2–3.6 for the two broken averages found on `val`,
+# at most 0.7 for the 33 others (docs/design.md#weights-check).
+AVERAGE_TOLERANCE_SE = 2.0
 DIGEST = "sha256"
 # weights → weight file
 _WEIGHT_FILE = {"best": "best", "last": "last", "final": "last", "average": "average"}
@@ -115,9 +119,31 @@ def snapshot_stem(epoch: int) -> str:
     return f"epoch_{epoch:04d}"
 
 
-def chosen_weights(record: dict[str, Any], weights: str | None) -> str:
-    """`weights`, or when None the checkpoint's own choice (`TrainConfig.weights`)."""
-    return weights if weights is not None else str(record["train"]["weights"])
+def chosen_weights(record: dict[str, Any], weights: str | None, folder: Path | None = None) -> str:
+    """`weights`, or when None the checkpoint's own choice (`TrainConfig.weights`), where the weight
+    average fails its check (`average_fails`, given the checkpoint's `folder`) the final weights."""
+    if weights is not None:
+        return weights
+    own = str(record["train"]["weights"])
+    return "final" if own == "average" and folder is not None and average_fails(folder, record) else own
+
+
+def average_fails(folder: Path, record: dict[str, Any]) -> bool:
+    """Whether the weight average's validation loss (average.json) exceeds the final weights' (last.json)
+    by more than `AVERAGE_TOLERANCE_SE` standard errors of their difference (the per-sample spreads
+    over the validation samples, as independent): averaging an epoch in which an output unit was dead
+    with epochs in which it lived leaves a phantom obstacle the loss shows (docs/design.md#weights-check).
+    False where either record, or its loss, is missing."""
+    try:
+        average, final = read_sidecar(folder, "average"), read_sidecar(folder, "last")
+    except FileNotFoundError:
+        return False
+    keys = ("val_loss", "val_loss_std")
+    if not all(isinstance(r.get(k), (int, float)) for r in (average, final) for k in keys):
+        return False
+    samples = int(record["train"]["val_batches"]) * int(record["train"]["batch_size"])
+    error = ((average["val_loss_std"] ** 2 + final["val_loss_std"] ** 2) / samples) ** 0.5
+    return average["val_loss"] - final["val_loss"] > AVERAGE_TOLERANCE_SE * error
 
 
 def policy_record(record: dict[str, Any]) -> PolicyRecord:
@@ -278,7 +304,7 @@ def read_checkpoint(
     for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
         if asked is not None and asked != held:
             raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
-    chosen = chosen_weights(record, weights)
+    chosen = chosen_weights(record, weights, folder)
     path = folder / f"{weights_stem(chosen)}.safetensors"
     if not path.is_file():
         train = record["train"]

@@ -13,7 +13,8 @@ Output folder:
     OUT/report.html               the results, all generated from the runs above (depthq.report)
 
 Every stage is skipped when its output is complete (a dataset with all its runs, a checkpoint at
-its last epoch, an evaluation with its summary.json) and redone otherwise, so running the same
+its last epoch, an evaluation with its summary.json, driven with the weights its checkpoint acts with
+now: `evaluation_done`) and redone otherwise, so running the same
 command again after an interruption resumes where it stopped. The stages are `depthq.parallel`
 jobs: here one after the other, or on a Ray cluster one task per training and per evaluation.
 """
@@ -31,7 +32,7 @@ from depthq.configio import atomic_write_bytes, provenance, read_json, write_jso
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.errors import ConfigError
-from depthq.evaluate.online import EvalConfig, evaluate
+from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
 from depthq.nets.checkpoint import read_config
 from depthq.nets.device import resolve_device
 from depthq.nets.migrations import sweep_setup
@@ -55,10 +56,6 @@ class Stage:
     @property
     def name(self) -> str:
         return self.job.name
-
-
-def _eval_done(folder: Path) -> bool:
-    return (folder / "summary.json").is_file()
 
 
 def _trained(config: TrainConfig, folder: Path) -> bool:
@@ -111,7 +108,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     for ref in ("heuristic", "ou"):
         folder = out / "eval" / ref
         drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
-        stages.append(Stage(partial(_eval_done, folder), Job(f"evaluate {ref}", drive)))
+        stages.append(Stage(partial(evaluation_done, folder), Job(f"evaluate {ref}", drive)))
     # Every model's training and evaluation is a job of one core (a process of its own, locally one
     # per free core: docs/design.md#overlap): a training on one thread, so its bytes depend on no
     # machine's core count (torch sums floats in an order that depends on the thread count), and an
@@ -128,7 +125,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
                 Job(f"train {model.name}", fit, ("features",), True, 1, gpus),
             ),
             Stage(
-                partial(_eval_done, ev),
+                partial(evaluation_done, ev),
                 Job(f"evaluate {model.name}", drive, (f"train {model.name}",), True, 1, gpus),
             ),
         ]

@@ -78,7 +78,7 @@ class QNetPolicy(GreedyPolicy):
             name=f"{get_network(kind).label}:{Path(folder).name}",
             source=str(folder),
             device=device,
-            weights=weights_stem(chosen_weights(config, weights)),
+            weights=weights_stem(chosen_weights(config, weights, Path(folder))),
             selection=selection,
         )
 

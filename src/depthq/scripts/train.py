@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from depthq.flags import add_config_arguments, config_from_args, flag_name
-from depthq.nets.checkpoint import read_sidecar
+from depthq.nets.checkpoint import chosen_weights, read_config, read_sidecar
 from depthq.nets.device import DEVICE_HELP
 from depthq.nets.migrations import RENAMED_SETTINGS
 from depthq.train.config import TrainConfig
@@ -31,8 +31,10 @@ def run(args: argparse.Namespace) -> int:
     best, last = read_sidecar(out, "best"), read_sidecar(out, "last")
     average = read_sidecar(out, "average") if config.average else None
     also = f", average.safetensors: epochs {average['epochs'][0]}–{average['epochs'][1]}" if average else ""
+    acts = chosen_weights(read_config(out), None, out)
+    why = "" if acts == config.weights else f" ({config.weights} fails its check: design.md#weights-check)"
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "
-          f"last.safetensors: epoch {last['epoch']}{also}; acts with {config.weights})")
+          f"last.safetensors: epoch {last['epoch']}{also}; acts with {acts}{why})")
     for name, row in (("best", best), ("last", last)):
         print(f"{name}: train_loss {row['train_loss']:.4f}  val_loss {row['val_loss']:.4f}  "
               f"val_loss_std {row['val_loss_std']:.4f}")

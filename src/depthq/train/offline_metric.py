@@ -52,7 +52,7 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     else:  # the trunk was trained with the head: run it on the frames themselves
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
-    stem = weights_stem(chosen_weights(config, weights))
+    stem = weights_stem(chosen_weights(config, weights, Path(checkpoint)))
     if lookahead == 1:
         loss, _ = loss_function(train_config)(outputs, targets)
         return {"metric": network.metric, "value": float(loss), "samples": len(targets), "weights": stem}
