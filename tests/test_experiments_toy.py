@@ -54,7 +54,8 @@ def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_pytho
     live = [f"depthq.experiments.{m.name}" for m in pkgutil.iter_modules(experiments.__path__)]
     finished = [f"research.{m.name}" for m in pkgutil.iter_modules(research.__path__)]
     assert set(live) == {"depthq.experiments.camera_labels", "depthq.experiments.looks",
-                         "depthq.experiments.ros_fidelity", "depthq.experiments.weights_check"}
+                         "depthq.experiments.ros_fidelity", "depthq.experiments.sizing",
+                         "depthq.experiments.weights_check"}
     assert {f"research.{name}" for name in ("action_fidelity", "hard_canyons", "investigation", "lookahead",
                                             "oracle_gap", "precision", "val_choices")} <= set(finished)
     for name in live + finished:

@@ -292,7 +292,9 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
             odom = [(t, reader.deserialize(raw, c.msgtype).pose.pose.position) for c, t, raw in
                     reader.messages([c for c in reader.connections if c.topic == "/odom"])]
         assert twists[-1].linear.x == 0 and twists[-1].angular.z == 0
-        assert abs(len(twists) - first["commands"]) <= 1
+        # every command the sim heard, but the bag's subscription connects to the drive's publisher on
+        # its own (ROS 1's handshake): under load it may miss the first few
+        assert 0 <= first["commands"] - len(twists) <= 3, (len(twists), first["commands"])
         still = np.array([(p.x, p.y) for _, p in odom[-20:]])  # the run's last 0.6 s: not a micrometre moved
         assert np.ptp(still, axis=0).max() < 1e-6
         imported = subprocess.run(
