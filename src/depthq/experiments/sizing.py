@@ -168,7 +168,7 @@ def report(out: Path) -> str:
     """OUT/report.md (and the same as OUT/sizing.json): one row per variant, and each network's choice."""
     rows = compare(points(out))
     head = ["network", "hidden", "epochs", *(f"{f} val, {n} runs: m" for f in CANYONS for n in SIZES),
-            "paired difference from 4096/40: m", "pairs", "as far", "s/epoch"]
+            "paired difference from 4096/40: m", "pairs", "as far", "s/epoch as trained (shared core?)"]
     body = [[r["net"], r["hidden"], r["epochs"],
              *(mean_interval(v, ".2f") for v in r["distance"].values()),
              _difference(r["difference"], r["interval"]),
