@@ -139,9 +139,9 @@ def average_fails(folder: Path, record: dict[str, Any]) -> bool:
     except FileNotFoundError:
         return False
     keys = ("val_loss", "val_loss_std")
-    if not all(isinstance(r.get(k), (int, float)) for r in (average, final) for k in keys):
+    samples = record["train"].get("val_batches", 0) * record["train"].get("batch_size", 0)
+    if samples < 1 or not all(isinstance(r.get(k), (int, float)) for r in (average, final) for k in keys):
         return False
-    samples = int(record["train"]["val_batches"]) * int(record["train"]["batch_size"])
     error = ((average["val_loss_std"] ** 2 + final["val_loss_std"] ** 2) / samples) ** 0.5
     return average["val_loss"] - final["val_loss"] > AVERAGE_TOLERANCE_SE * error
 
