@@ -166,7 +166,8 @@ def _difference(mean: float | None, ci: tuple[float, float] | None) -> str:
 
 def report(out: Path) -> str:
     """OUT/report.md (and the same as OUT/sizing.json): one row per variant, and each network's choice."""
-    rows = compare(points(out))
+    found = points(out)
+    rows = compare(found)
     head = ["network", "hidden", "epochs", *(f"{f} val, {n} runs: m" for f in CANYONS for n in SIZES),
             "paired difference from 4096/40: m", "pairs", "as far", "s/epoch as trained (shared core?)"]
     body = [[r["net"], r["hidden"], r["epochs"],
@@ -187,7 +188,7 @@ def report(out: Path) -> str:
     text = "\n".join(lines) + "\n"
     atomic_write_bytes(out / "report.md", text.encode())
     write_json(out / "sizing.json", {"rows": rows, "choices": {n: choice(rows, n) for n in NETS},
-                                     "points": [asdict(p) for p in points(out)]})
+                                     "points": [asdict(p) for p in found]})
     return text
 
 

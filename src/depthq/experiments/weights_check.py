@@ -80,8 +80,7 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
         policy = QNetPolicy.from_checkpoint(folder, weights=choice)
         values = policy.candidate_values(features)  # (F, A, 26) bins or (F, A) probabilities
         actions = np.asarray(policy.actions)
-        scores = np.stack([policy.network.scores(v) for v in values])
-        spreads = scores.max(1) - scores.min(1)
+        spreads = score_spreads(policy, values)
         chosen = np.array([policy.network.choose(v, actions) for v in values])
         dead, phantom, phantom_bins = np.array([], int), 0.0, []
         if values.ndim == 3:  # bins: (F, A, n_bins)
@@ -103,10 +102,10 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
     return out
 
 
-def spread(policy: QNetPolicy, features: torch.Tensor) -> float:
-    """The median over frames of the spread of the candidates' scores (m or probability)."""
-    scores = np.stack([policy.network.scores(v) for v in policy.candidate_values(features)])
-    return float(np.median(scores.max(1) - scores.min(1)))
+def score_spreads(policy: QNetPolicy, values: np.ndarray) -> np.ndarray:
+    """Per frame of `values` (`candidate_values`), the spread of its candidates' scores (m or probability)."""
+    scores = np.stack([policy.network.scores(v) for v in values])
+    return scores.max(1) - scores.min(1)
 
 
 def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, float]]:
@@ -122,7 +121,7 @@ def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str
         for dynamics, other in policies.items():
             mixed = copy.deepcopy(policy)
             mixed.net.head.output["dynamics"].load_state_dict(other.net.head.output["dynamics"].state_dict())
-            out[perceive][dynamics] = spread(mixed, features)
+            out[perceive][dynamics] = float(np.median(score_spreads(mixed, mixed.candidate_values(features))))
     return out
 
 
