@@ -7,6 +7,7 @@ import itertools
 
 from depthq.experiments import sizing
 from depthq.experiments.sizing import Point
+from depthq.lock import exclusive
 
 
 def test_the_sweeps_train_every_width_and_depth_q_net_every_epoch_budget() -> None:
@@ -38,3 +39,11 @@ def test_the_cheapest_variant_that_drives_as_far_is_chosen() -> None:
 
     partial = [p for p in _points(distance) if not (p.hidden == 1024 and p.seed == 1)]
     assert sizing.choice(sizing.compare(partial), "depth") is None  # a variant lacks pairs: no choice yet
+
+
+def test_one_writer_per_experiment_folder(tmp_path) -> None:
+    out = tmp_path / "sizing"
+    out.mkdir()
+    with exclusive(out):
+        assert sizing.main(["report", str(out)]) == 2  # another process writes there
+    assert sizing.main(["report", str(out)]) == 0 and (out / "report.md").is_file()

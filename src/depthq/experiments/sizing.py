@@ -28,6 +28,7 @@ import numpy as np
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluation_done
+from depthq.lock import exclusive
 from depthq.nets.checkpoint import read_config
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
@@ -203,11 +204,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def work() -> int:
-        if args.action == "run":
-            run(args.out, args.device)
-        elif not args.out.is_dir():
+        if args.action == "report" and not args.out.is_dir():
             raise ConfigError(f"{args.out}: no such experiment folder")
-        print(report(args.out))
+        with exclusive(args.out, "OUT"):  # one writer per experiment folder
+            if args.action == "run":
+                run(args.out, args.device)
+            print(report(args.out))
         return 0
 
     return guarded(PROG, work)

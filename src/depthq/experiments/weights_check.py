@@ -20,6 +20,7 @@ choice moves its actions. Make choices on `val` canyons.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import sys
 from dataclasses import replace
@@ -33,6 +34,7 @@ from depthq.configio import write_json
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.lock import exclusive
 from depthq.nets.checkpoint import dataset_record, read_config, weights_stem
 from depthq.nets.heads import DepthFirstHead
 from depthq.policies.qnet import QNetPolicy
@@ -184,12 +186,13 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--frames must be >= 1, got {args.frames}")
         if args.canyons is not None and args.out is None:
             raise ConfigError("--canyons needs --out, the evaluations' folder")
-        measured = measure(args.checkpoint, weights, args.frames)
-        mixed = parts(args.checkpoint, weights, args.frames) if args.parts else None
-        driven = drive(args.checkpoint, weights, args.canyons, args.out) if args.canyons else None
-        if args.out is not None:
-            write_json(args.out / "weights_check.json",
-                       {"measured": measured, "parts": mixed, "driven": driven})
+        with exclusive(args.out) if args.out is not None else contextlib.nullcontext():
+            measured = measure(args.checkpoint, weights, args.frames)
+            mixed = parts(args.checkpoint, weights, args.frames) if args.parts else None
+            driven = drive(args.checkpoint, weights, args.canyons, args.out) if args.canyons else None
+            if args.out is not None:
+                write_json(args.out / "weights_check.json",
+                           {"measured": measured, "parts": mixed, "driven": driven})
         print(table(measured, driven))
         if mixed:
             print("\n" + parts_table(mixed))
