@@ -41,6 +41,9 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     assert error["name"] == "floor" and error["split"] == "val" and error["runs"] == len(val.entries("val"))
     assert 0 < error["frames"] <= sum(e.n_frames for e in val.entries("val"))
     assert error["nearest"]["median"] is not None and error["nearest"]["median"] >= 0
+    # every net's offline metric on the driving look's validation runs, scored against the LiDAR's bins
+    predicted = json.loads(looks.prediction_path(out, "textured", "heldout", "camera", 0).read_text())
+    assert predicted["metric"] == "abs_diff" and predicted["value"] > 0 and predicted["data"] == str(val.root)
     printed = capsys.readouterr().out
     assert "| Depth-Q-Net, camera labels | textured |" in printed
     assert f"| floor, trained in textured | {_cell(out)} |" in printed  # the second table: per look
@@ -59,6 +62,11 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     text = (out / "report.md").read_text()
     assert "| Depth-Q-Net, camera labels | textured |" in text and "| floor, trained in textured |" in text
     assert (out / "looks.png").is_file() and "data:image/png;base64," in (out / "report.html").read_text()
+    assert f"| Depth-Q-Net, camera labels | textured | {predicted['value']:.3f} | abs_diff | – |" in text
+    # how far training carried: the Coll-Q-Net's validation loss after its one epoch, from its metrics.csv
+    logged = (out / "textured" / "sweep" / "models" / "coll_n3_s0" / "metrics.csv").read_text().splitlines()
+    val_loss = float(logged[1].split(",")[logged[0].split(",").index("val_loss")])
+    assert f"| Coll-Q-Net | textured | 1 | {val_loss:.3f} | {val_loss:.3f} (1) |" in text
     # never driven in the textured look: the first question is open, the second one is answered
     first, second = (line for line in text.splitlines() if line.startswith("- Does"))
     assert "**not yet measured**" in first
@@ -79,9 +87,10 @@ def test_the_looks_report_says_not_yet_measured_for_what_is_missing(tmp_path: Pa
     empty, no error; a folder that does not exist is a clear error (exit 2) and nothing is written."""
     first, second = looks.answers(tmp_path)
     assert "**not yet measured**" in first and "**not yet measured**" in second
-    for rows in (looks.table_rows(tmp_path), looks.transfer_rows(tmp_path), looks.labeller_rows(tmp_path)):
+    for rows in (looks.table_rows(tmp_path), looks.transfer_rows(tmp_path), looks.labeller_rows(tmp_path),
+                 looks.learning_rows(tmp_path), looks.prediction_rows(tmp_path)):
         assert rows and all(cell == "–" for row in rows for key, cell in row.items()
-                            if key not in ("Q-net", "trained in", "labeller"))
+                            if key not in ("Q-net", "trained in", "labeller", "seeds", "metric"))
     assert looks.main(["report", str(tmp_path / "none")]) == 2
     assert not (tmp_path / "none").exists()
 

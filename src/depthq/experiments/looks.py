@@ -21,13 +21,15 @@ then, per driving look D:
 
     OUT/val_<D>/data/          `--val-runs` validation runs in look D (val canyons, seed VAL_SEED)
     OUT/val_<D>/<method>_<L>.json  the labeller trained in L measured there against the LiDAR's bins
+    OUT/val_<D>/predictions_<L>_<net>_s<S>.json  each net's offline metric there (its loss on those runs)
 
 `table` prints, per net and training look, the distance to the first collision (mean [95 %
 interval] over seeds) in each driving look, and each look's share of the training look's; then per
-training look its labeller's nearest-bin error in each driving look. `report` writes both, the
-held-out look's cost to the colour-trained nets beside what textured training gives back (paired by
-seed), the issue's two "done when" answers and the same pose in every look (OUT/looks.png) into
-OUT/report.md and OUT/report.html.
+training look its labeller's nearest-bin error in each driving look. `report` writes both, each net's
+offline metric in each driving look, the held-out look's cost to the colour-trained nets beside what
+textured training gives back (paired by seed), how far each net's training carries to new runs of its
+look (validation loss by epoch), the issue's two "done when" answers and the same pose in every look
+(OUT/looks.png) into OUT/report.md and OUT/report.html.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from depthq.experiments import camera_labels
 from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
 from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
-from depthq.nets.checkpoint import CONFIG
+from depthq.nets.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
@@ -68,6 +70,8 @@ from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
+from depthq.train.folder import METRICS, read_metrics
+from depthq.train.offline_metric import offline_metric
 
 PROG = "python -m depthq.experiments.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
@@ -263,6 +267,36 @@ def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], driv
                 write_json(path, record)
 
 
+def prediction_path(out: Path, look: str, drive: str, net: str, seed: int) -> Path:
+    """Where the offline metric of `net` (seed `seed`) trained in `look`, on `drive`'s validation runs,
+    is kept."""
+    return Path(out) / f"val_{drive}" / f"predictions_{look}_{net}_s{seed}.json"
+
+
+def measure_predictions(out: Path, runs: int, seeds: tuple[int, ...], train_looks: tuple[str, ...],
+                        drive_looks: tuple[str, ...], method: str) -> None:
+    """Every net's offline metric (its training loss against the LiDAR's bins or the bump,
+    `depthq.train.offline_metric`) on each driving look's validation runs, OUT/val_<look>/data: how
+    well it predicts in a look, apart from how it drives there (resumed: a record made with the
+    weights its checkpoint acts with now is kept)."""
+    for drive in drive_looks:
+        data = Path(out) / f"val_{drive}" / "data"
+        for look in train_looks:
+            for seed in seeds:
+                for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
+                    path = prediction_path(out, look, drive, net, seed)
+                    if not (checkpoint / CONFIG).is_file():
+                        continue
+                    stem = weights_stem(chosen_weights(read_config(checkpoint), None, checkpoint))
+                    if path.is_file() and read_json(path)["weights"] == stem:
+                        continue
+                    print(f"offline metric of {checkpoint} in the {drive} look → {path}", flush=True)
+                    dataset = Dataset.open(data)
+                    record = offline_metric(checkpoint, dataset)
+                    write_json(path, {**record, "checkpoint": str(checkpoint), "data": str(data),
+                                      "data_fingerprint": dataset.fingerprint()})
+
+
 def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
         canyons: str = "hard/eval", choose: str = CHOOSE, train_looks: tuple[str, ...] = TRAIN_LOOKS,
         drive_looks: tuple[str, ...] = DRIVE_LOOKS, method: str = "monodepth",
@@ -303,6 +337,7 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
                     evaluate(str(checkpoint), folder, config, workers=workers, progress=progress,
                              device=device, video=False)
     measure_labellers(out, preset, train_looks, drive_looks, method, val_runs, workers, progress)
+    measure_predictions(out, runs, seeds, train_looks, drive_looks, method)
     print(table(out, runs, seeds, train_looks, drive_looks, method))
     return 0
 
@@ -372,6 +407,63 @@ def labeller_rows(out: Path, train_looks: tuple[str, ...] = TRAIN_LOOKS,
     return rows
 
 
+LEARNING_COLUMNS = ("val loss, epoch 1", "val loss, best (epoch per seed)", "val loss, last epoch",
+                    "best / epoch 1", "train loss, last epoch")
+
+
+def learning_rows(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+                  train_looks: tuple[str, ...] = TRAIN_LOOKS, method: str = PINNED_METHOD
+                  ) -> list[dict[str, str]]:
+    """Per net and training look, how far training carries to the look's validation runs (mean over
+    the seeds trained): the validation loss after the first epoch, at its best, at the last epoch, the
+    best as a share of the first (near 100 %: nothing learnt after the first epoch carries to new
+    runs), and the training loss at the last epoch. Each net's own loss (the camera-label net's against
+    its labels), so compare looks within a row pair, not nets."""
+    rows = []
+    for net, label in NETS.items():
+        for look in train_looks:
+            logs = [m for seed in seeds
+                    if ((folder := checkpoints(out, look, runs, seed, method)[net]) / METRICS).is_file()
+                    and (m := read_metrics(folder))]
+            row = {"Q-net": label, "trained in": look, "seeds": str(len(logs))}
+            if not logs:
+                rows.append({**row, **dict.fromkeys(LEARNING_COLUMNS, "–")})
+                continue
+            first = np.mean([m["val_loss"][0] for m in logs])
+            best = np.mean([np.min(m["val_loss"]) for m in logs])
+            best_epochs = ",".join(str(int(m["epoch"][np.argmin(m["val_loss"])])) for m in logs)
+            cells = (f"{first:.3f}", f"{best:.3f} ({best_epochs})",
+                     f"{np.mean([m['val_loss'][-1] for m in logs]):.3f}",
+                     f"{best / first:.0%}" if first > 0 else "–",
+                     f"{np.mean([m['train_loss'][-1] for m in logs]):.3f}")
+            rows.append({**row, **dict(zip(LEARNING_COLUMNS, cells, strict=True))})
+    return rows
+
+
+def prediction_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: tuple[str, ...] = TRAIN_LOOKS,
+                    drive_looks: tuple[str, ...] = DRIVE_LOOKS) -> list[dict[str, str]]:
+    """Per net and training look, its offline metric on each driving look's validation runs (mean
+    [95 % interval] over seeds; m of absolute difference for the Depth-Q-Nets, both scored against
+    the LiDAR's bins, cross-entropy for Coll-Q-Net), and each look's as a multiple of its own look's."""
+    rows = []
+    for net, label in NETS.items():
+        for look in train_looks:
+            row, means, metric = {"Q-net": label, "trained in": look}, {}, "–"
+            for drive in drive_looks:
+                paths = [prediction_path(out, look, drive, net, seed) for seed in seeds]
+                found = [read_json(p) for p in paths if p.is_file()]
+                values = [float(r["value"]) for r in found]
+                metric = found[0]["metric"] if found else metric
+                means[drive] = float(np.mean(values)) if values else None
+                row[f"in {drive}"] = mean_interval(values, ".3f", len(seeds)) if values else "–"
+            row["metric"] = metric
+            for drive in drive_looks:
+                ratio = means[drive] / means[look] if means.get(look) and means[drive] is not None else None
+                row[f"{drive} / own"] = "–" if ratio is None else f"{ratio:.2f} ×"
+            rows.append(row)
+    return rows
+
+
 def _paired(first: Summaries, second: Summaries) -> tuple[str, list[float]]:
     """second − first, m to the first collision paired by seed (`by_seed`): 'mean [95 % interval]
     (seeds)', and the differences."""
@@ -423,7 +515,8 @@ def answers(out: Path, seeds: tuple[int, ...] = (0, 1, 2), randomised: str = TEX
         share = np.mean(there) / np.mean(here)
         first += (f"**{'yes' if share >= DONE_SHARE else 'no'}**: {share:.0%} "
                   f"({mean_interval(there, '.2f')} m against {mean_interval(here, '.2f')} m, "
-                  f"seeds {','.join(map(str, both))} of {len(seeds)}).")
+                  f"seeds {','.join(map(str, both))} of {len(seeds)}); {heldout} − {randomised}, paired: "
+                  f"{_paired(own, camera)[0]} m.")
     else:
         first += f"**{NOT_MEASURED}** (no seed evaluated in both looks under {where})."
     second = f"Does it drive the {heldout} look at least as far as Coll-Q-Net trained on the same data? "
@@ -465,6 +558,13 @@ def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
         ("Every net × training look × driving look", [],
          table_rows(out, runs, seeds, train_looks, drive_looks)),
         ("The held-out look's cost, and what textured training gives back", [], transfer_rows(out, seeds)),
+        ("How well each net predicts in each look",
+         ["Each net's training loss on each driving look's validation runs (`depthq.train.offline_metric`, "
+          "the Depth-Q-Nets' absolute difference against the LiDAR's bins whatever their labels), apart "
+          "from how it drives there."], prediction_rows(out, seeds, train_looks, drive_looks)),
+        ("What training carries to new runs of its look",
+         ["Validation loss of each net in its training look's validation runs, by epoch (the checkpoint's "
+          "metrics.csv)."], learning_rows(out, runs, seeds, train_looks, method)),
         ("The labellers' error per look", [f"The {method} labeller trained in each look against the LiDAR's "
                                            "bins: median [mean] absolute error of each frame's nearest bin."],
          labeller_rows(out, train_looks, drive_looks, method)),

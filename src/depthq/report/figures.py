@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import matplotlib
@@ -14,12 +13,7 @@ import numpy as np
 from depthq.networks import get_network, network_names
 from depthq.pipeline.sweep import Sweep, variant_label
 from depthq.report.tables import collect_results, interval, per_seed
-
-
-def _read_metrics(path: Path) -> dict[str, np.ndarray]:
-    with path.open() as f:
-        rows = list(csv.DictReader(f))
-    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]} if rows else {}
+from depthq.train.folder import METRICS, read_metrics
 
 
 def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
@@ -35,9 +29,9 @@ def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:
         loss_ax, std_ax = axes[0, column], axes[1, column]
         for colour, n in zip(colours, sweep.subsets, strict=True):
             logs = [
-                _read_metrics(p)
+                read_metrics(p)
                 for s in sweep.seeds
-                if (p := out / "models" / folders[net, n, s] / "metrics.csv").is_file()
+                if ((p := out / "models" / folders[net, n, s]) / METRICS).is_file()
             ]
             logs = [m for m in logs if m]
             if not logs:

@@ -239,6 +239,14 @@ def epoch_seconds(out: Path) -> dict[int, float]:
         return {}
 
 
+def read_metrics(out: Path) -> dict[str, np.ndarray]:
+    """The training folder's metrics.csv as columns, one value per epoch (nan where a cell is empty);
+    {} where it has logged no epoch."""
+    with (out / METRICS).open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) if r[k] else np.nan for r in rows]) for k in rows[0]} if rows else {}
+
+
 def saved_epoch(out: Path) -> int:
     """Epochs finished in `out`: the epoch of its resume state, 0 if it has none."""
     path = out / STATE
