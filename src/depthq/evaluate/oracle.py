@@ -138,14 +138,17 @@ class OracleWorld:
         self.env.close()
 
 
-def env_config(canyons: list[str], decision_hz: float, time_limit_s: float | None = None) -> EnvConfig:
-    """The evaluation env of `canyons` (one family) at `decision_hz`: the family's world and time limit."""
+def env_config(canyons: list[str], decision_hz: float, time_limit_s: float | None = None,
+               look: str | None = None) -> EnvConfig:
+    """The evaluation env of `canyons` (one family) at `decision_hz`: the family's world and time limit,
+    in `look` (None: the family's own)."""
     families = {CanyonId.parse(c).family for c in canyons}
     if len(families) != 1:
         raise ConfigError(f"oracle canyons must be of one family, got {sorted(families)}")
     family = families.pop()
     limit = FAMILIES[family].time_limit_s if time_limit_s is None else time_limit_s
-    return EnvConfig(world=world_for(WorldConfig(decision_hz=decision_hz), family), time_limit_s=limit)
+    world = world_for(WorldConfig(decision_hz=decision_hz), family)
+    return EnvConfig(world=world if look is None else replace(world, look=look), time_limit_s=limit)
 
 
 def drive_oracle(oracle: Oracle, canyons: list[str], decision_hz: float) -> dict[str, Any]:
@@ -211,8 +214,9 @@ def agreement(
     decisive, agrees, seconds to the collision (inf where the run did not end in one). A policy's
     action agrees when the oracle scores it within the tie tolerance of its best (continuous actions
     are taken as the nearest candidate). With `predictions`, a checkpoint's policy is shown the frame
-    rendered at each pose (its pixel noise drawn anew) and its values are kept too: `predicted`
-    (steps, N, …) and `predicted_scores` (steps, N) by its own rule."""
+    rendered at each pose in the evaluation's look (its pixel noise drawn anew; in a look with a camera
+    model, through a camera drawn anew, at rest) and its values are kept too: `predicted` (steps, N, …)
+    and `predicted_scores` (steps, N) by its own rule."""
     folder = Path(folder)
     try:
         summary = json.loads((folder / "summary.json").read_text())
@@ -224,7 +228,7 @@ def agreement(
     hz = float(summary["config"]["decision_hz"])
     canyons = [r["canyon"] for r in records]
     policy = _checkpoint_policy(summary) if predictions else None
-    sim = OracleWorld(env_config(canyons, hz), camera=policy is not None)
+    sim = OracleWorld(env_config(canyons, hz, look=summary.get("look")), camera=policy is not None)
     candidates = np.array(ACTIONS)
     rows: dict[str, list] = {k: [] for k in ("canyon", "step", "policy", "oracle", "scores", "true_bins",
                                              "decisive", "agrees", "to_collision_s", "predicted",
@@ -270,6 +274,7 @@ def agreement(
 
     return {**_prediction_summary(arrays, oracle, late, None if policy is None else policy.network), **{
         "evaluation": str(folder),
+        "look": sim.env.config.world.look,
         "policy": summary["policy"].get("policy"),
         "oracle": str(oracle),
         "decision_hz": hz,

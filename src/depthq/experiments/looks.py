@@ -52,6 +52,8 @@ from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.data.stats import error_cell, label_errors
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
+from depthq.evaluate.oracle import Oracle
+from depthq.evaluate.probe import agreement_file, measure_agreement
 from depthq.experiments import camera_labels
 from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
@@ -342,6 +344,85 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
     return 0
 
 
+DIAGNOSE_NETS = ("depth", "camera")  # the nets whose scores the depth oracle's compare with
+
+
+def diagnosis_folder(out: Path, look: str, drive: str) -> Path:
+    """Where `diagnose` drives the nets trained in `look` in the choice canyons in `drive`, and keeps
+    their agreement."""
+    return Path(out) / look / f"diagnose_{drive}"
+
+
+def diagnose(out: Path, *, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+             train_looks: tuple[str, ...] = (TEXTURED,), drive_looks: tuple[str, ...] = (TEXTURED, HELDOUT),
+             nets: tuple[str, ...] = DIAGNOSE_NETS, choose: str = CHOOSE, method: str = PINNED_METHOD,
+             time_limit_s: float | None = None, workers: int = 2, device: str = "auto",
+             progress: bool = True) -> int:
+    """Why a net drives one look less far than another, on the choice canyons (never the table's): each
+    net trained in a training look driven in each driving look, then along its own runs the depth
+    oracle's action at every pose and the net's prediction from the frame re-rendered there
+    (`depthq.evaluate.oracle.agreement`): how often it took the best action, and how far its scores
+    are from the true ones, on the states it reached (resumed)."""
+    out = Path(out).resolve()
+    for look in (*train_looks, *drive_looks):
+        check_look(look)
+    unknown = sorted(set(nets) - set(NETS))
+    if unknown:
+        raise ConfigError(f"--nets {','.join(unknown)}: not a net of this experiment ({', '.join(NETS)})")
+    driving = EvalConfig(canyons=parse_canyon_set(choose), time_limit_s=time_limit_s)
+    oracle = Oracle()
+    for look in train_looks:
+        for drive in drive_looks:
+            where = diagnosis_folder(out, look, drive)
+            for seed in seeds:
+                for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
+                    folder = where / f"{net}_s{seed}"
+                    if net not in nets or not (checkpoint / CONFIG).is_file():
+                        continue
+                    if not evaluation_done(folder):
+                        print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
+                        evaluate(str(checkpoint), folder, replace(driving, look=drive), workers=workers,
+                                 progress=progress, device=device, video=False)
+                    path = agreement_file(where, folder.name, oracle, ".json")
+                    weights = read_json(folder / "summary.json")["policy"]["weights"]
+                    if path.is_file() and read_json(path)["weights"] == weights:
+                        continue
+                    print(f"agreement of {folder} → {path}", flush=True)
+                    summary = measure_agreement(folder, oracle, where, predictions=True)
+                    write_json(path, {**summary, "weights": weights})
+    print(markdown(diagnosis_rows(out, seeds, train_looks, drive_looks, nets)))
+    return 0
+
+
+DIAGNOSIS = {"distance_to_collision_mean": ("m to first collision", ".2f"),
+             "agreement_decisive": ("took the best action, decisive steps", ".1%"),
+             "agreement_before_collision": ("took the best action, last 2 s before a collision", ".1%"),
+             "score_error": ("score error: m", ".3f"), "true_spread": ("true spread: m", ".3f"),
+             "predicted_spread": ("predicted spread: m", ".3f"),
+             "same_decision_new_noise": ("same decision, frame rendered again", ".1%")}
+
+
+def diagnosis_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: tuple[str, ...] = (TEXTURED,),
+                   drive_looks: tuple[str, ...] = (TEXTURED, HELDOUT), nets: tuple[str, ...] = DIAGNOSE_NETS
+                   ) -> list[dict[str, str]]:
+    """Per net, training look and driving look, `diagnose`'s agreement summaries (mean [95 % interval]
+    over the seeds measured): how far it drove the choice canyons, how often it took the depth
+    oracle's best action, and its scores' error and spread against the truth along its own runs."""
+    rows = []
+    for net in nets:
+        for look in train_looks:
+            for drive in drive_looks:
+                where = diagnosis_folder(out, look, drive)
+                found = [read_json(p) for seed in seeds
+                         if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
+                row = {"Q-net": NETS[net], "trained in": look, "driven in": drive, "seeds": str(len(found))}
+                for key, (title, spec) in DIAGNOSIS.items():
+                    values = [float(f[key]) for f in found if f.get(key) is not None]
+                    row[title] = mean_interval(values, spec, len(seeds)) if values else "–"
+                rows.append(row)
+    return rows
+
+
 def _distances(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]) -> Summaries:
     """seed → evaluation summary of `net` trained in `look`, driven in `drive`, where it is written."""
     folder = Path(out) / look / f"eval_{drive}"
@@ -553,6 +634,7 @@ def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
              "Distance to the first collision, mean [95 % Student-t interval] over seeds; "
              "paired differences by training seed. The issue asks its answers of the hard `eval` canyons, "
              "500 runs, 3 seeds.")
+    diagnosed = [r for r in diagnosis_rows(out, seeds, train_looks, drive_looks) if r["seeds"] != "0"]
     sections = [
         ("Done when (issue #45)", answers(out, seeds), None),
         ("Every net × training look × driving look", [],
@@ -565,6 +647,12 @@ def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
         ("What training carries to new runs of its look",
          ["Validation loss of each net in its training look's validation runs, by epoch (the checkpoint's "
           "metrics.csv)."], learning_rows(out, runs, seeds, train_looks, method)),
+        ("Along the nets' own runs, in the choice canyons",
+         [f"`{PROG} diagnose`: each net driven in the `val` canyons of each look, and at every step of its "
+          "runs the depth oracle's action (the true next bins of each candidate) and the net's scores "
+          "from the frame rendered again there. Decisive: the candidates' true scores differ by more "
+          "than 1 cm." if diagnosed else f"{NOT_MEASURED} (`{PROG} diagnose {out}`)"],
+         diagnosed or None),
         ("The labellers' error per look", [f"The {method} labeller trained in each look against the LiDAR's "
                                            "bins: median [mean] absolute error of each frame's nearest bin."],
          labeller_rows(out, train_looks, drive_looks, method)),
@@ -619,6 +707,16 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--workers", type=int, default=2, help="processes per evaluation (default: 2)")
     go.add_argument("--device", default="auto", help="torch device (default: auto)")
     go.add_argument("--no-progress", action="store_true", help="no progress bars")
+    why = actions.add_parser("diagnose", parents=[common],
+                             help="the nets driven in the choice canyons of each look, their actions "
+                                  "and scores checked against the depth oracle's along their runs (resumed)")
+    why.add_argument("--nets", default=",".join(DIAGNOSE_NETS),
+                     help=f"the nets to diagnose (default: {','.join(DIAGNOSE_NETS)})")
+    why.add_argument("--choose", default=CHOOSE, help=f"the canyons to drive (default: {CHOOSE})")
+    why.add_argument("--time-limit", type=float, default=None, help="seconds per evaluation run")
+    why.add_argument("--workers", type=int, default=2, help="processes per evaluation (default: 2)")
+    why.add_argument("--device", default="auto", help="torch device (default: auto)")
+    why.add_argument("--no-progress", action="store_true", help="no progress bars")
     actions.add_parser("table", parents=[common], help="the Markdown tables of what OUT holds")
     actions.add_parser("report", parents=[common],
                        help="OUT/report.md and OUT/report.html: the tables, the issue's answers, the figure")
@@ -634,6 +732,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.action == "table":
             print(table(args.out, args.runs, seeds, train_looks, drive_looks, args.method))
             return 0
+        if args.action == "diagnose":
+            return diagnose(args.out, runs=args.runs, seeds=seeds, train_looks=train_looks,
+                            drive_looks=drive_looks, nets=_looks(args.nets), choose=args.choose,
+                            method=args.method, time_limit_s=args.time_limit, workers=args.workers,
+                            device=args.device, progress=not args.no_progress)
         if args.action == "report":
             print(f"wrote {report(args.out, args.runs, seeds, train_looks, drive_looks, args.method)}")
             return 0
