@@ -20,9 +20,12 @@ def test_the_sweeps_train_every_width_and_depth_q_net_every_epoch_budget() -> No
     assert depth.canyons == "hard/val:1000-1019" and depth.family == "hard"
 
 
-def _points(distance: dict[tuple[int, int], float], net: str = "depth") -> list[Point]:
-    """Every cell of the grid, each variant at `distance[(hidden, epochs)]` plus a seed's offset."""
-    return [Point(family, net, runs, seed, hidden, epochs, d + seed, 0, 1.0)
+def _points(distance: dict[tuple[int, int], float], net: str = "depth",
+            hard: dict[tuple[int, int], float] | None = None) -> list[Point]:
+    """Every cell of the grid, each variant at `distance[(hidden, epochs)]` (in the hard family
+    `hard[(hidden, epochs)]` where given) plus a seed's offset."""
+    return [Point(family, net, runs, seed, hidden, epochs,
+                  ((hard or {}).get((hidden, epochs), d) if family == "hard" else d) + seed, 0, 1.0)
             for (hidden, epochs), d in distance.items()
             for family, runs, seed in itertools.product(sizing.CANYONS, sizing.SIZES, sizing.SEEDS)]
 
@@ -31,14 +34,25 @@ def test_the_cheapest_variant_that_drives_as_far_is_chosen() -> None:
     distance = {sizing.REFERENCE: 20.0, (512, 40): 15.0, (1024, 20): 19.5, (1024, 40): 20.5, (2048, 40): 21.0}
     rows = sizing.compare(_points(distance))
     by = {(r["hidden"], r["epochs"]): r for r in rows}
-    assert by[sizing.REFERENCE]["difference"] == 0 and by[(512, 40)]["difference"] == -5
-    assert by[(512, 40)]["pairs"] == 8 and by[(512, 40)]["spread"] > 0
+    hard = {(h, e): r["families"]["hard"] for (h, e), r in by.items()}
+    assert hard[sizing.REFERENCE]["difference"] == 0 and hard[(512, 40)]["difference"] == -5
+    assert by[(512, 40)]["pairs"] == 8 and hard[(512, 40)]["spread"] > 0
     assert not by[(512, 40)]["as_far"] and by[(1024, 20)]["as_far"]  # within the seeds' spread
     assert sizing.choice(rows, "depth")["hidden"] == 1024 and sizing.choice(rows, "depth")["epochs"] == 20
     assert sizing.choice(rows, "coll") is None  # not measured
 
     partial = [p for p in _points(distance) if not (p.hidden == 1024 and p.seed == 1)]
     assert sizing.choice(sizing.compare(partial), "depth") is None  # a variant lacks pairs: no choice yet
+
+
+def test_a_variant_must_drive_as_far_in_every_family() -> None:
+    """1 m short in the hard family only: pooled with the paper family's pairs it would be within the
+    spread (0.71 m, from the seeds' offsets), per family it is not."""
+    distance = {sizing.REFERENCE: 20.0, (1024, 20): 20.0}
+    rows = sizing.compare(_points(distance, hard={sizing.REFERENCE: 20.0, (1024, 20): 19.0}))
+    cheap = next(r for r in rows if r["hidden"] == 1024)
+    assert cheap["families"]["paper"]["as_far"] and not cheap["families"]["hard"]["as_far"]
+    assert cheap["as_far"] is False and sizing.choice(rows, "depth")["hidden"] == 4096
 
 
 def test_one_writer_per_experiment_folder(tmp_path) -> None:

@@ -173,8 +173,7 @@ def default_canyons(policy_spec: str | PolicySpec) -> str:
         return eval_set(OnnxPolicy(spec.path, threads=1).family or PAPER)
     if spec.checkpoint is None:
         return "eval"
-    env = dataset_record(read_config(spec.checkpoint)).env or {}
-    return eval_set(env.get("world", {}).get("family", PAPER))
+    return eval_set(dataset_record(read_config(spec.checkpoint)).family or PAPER)
 
 
 def parse_canyon_set(text: str) -> tuple[str, ...]:

@@ -63,6 +63,7 @@ from depthq.host import host_fingerprint
 from depthq.nets.heads import HeadConfig, QNet
 from depthq.nets.migrations import migrate_checkpoint
 from depthq.nets.trunk import TRUNKS
+from depthq.sim.canyon import PAPER
 
 CONFIG = "config.json"
 FORMAT = "depthq-checkpoint"
@@ -88,6 +89,12 @@ class DatasetRecord:
     path: str  # absolute
     fingerprint: str | None  # `depthq.data.manifest.Dataset.fingerprint`; None in a version-1 record
     env: dict[str, Any] | None  # the manifest's "env" block, verbatim; None for a robot's recording
+
+    @property
+    def family(self) -> str | None:
+        """The canyon family its runs drove in (the manifest leaves the paper's, the default, unset);
+        None for a robot's recording."""
+        return None if self.env is None else self.env.get("world", {}).get("family", PAPER)
 
 
 @dataclass(frozen=True)
