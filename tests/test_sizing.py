@@ -61,3 +61,19 @@ def test_one_writer_per_experiment_folder(tmp_path) -> None:
     with exclusive(out):
         assert sizing.main(["report", str(out)]) == 2  # another process writes there
     assert sizing.main(["report", str(out)]) == 0 and (out / "report.md").is_file()
+
+
+def test_a_coll_q_nets_epochs_do_not_depend_on_its_budget(small_dataset, tmp_path) -> None:
+    """What `same_net_budget` stands on: the first E epochs of a longer training are a training of E
+    epochs, byte for byte (no schedule, one random stream), so the best epoch's weights are the same."""
+    from depthq.train.config import TrainConfig
+    from depthq.train.trainer import train
+
+    fast = {"train_batches": 2, "val_batches": 1, "batch_size": 8, "hidden": 16}
+    short = train(TrainConfig(model="coll", data=str(small_dataset), epochs=2, **fast), tmp_path / "e2",
+                  progress=False)
+    long = train(TrainConfig(model="coll", data=str(small_dataset), epochs=4, snapshots=(2,), **fast),
+                 tmp_path / "e4", progress=False)
+    assert (short / "last.safetensors").read_bytes() == (long / "epoch_0002.safetensors").read_bytes()
+    row = {"best_epochs": [7, 18, 26], "pairs": 3, "epochs": 40}
+    assert sizing.same_net_budget(row) == 30 and sizing.same_net_budget({**row, "best_epochs": [7]}) is None

@@ -18,7 +18,6 @@ default changes. Nothing here pins cores (the caller's `taskset` does).
 from __future__ import annotations
 
 import argparse
-import csv
 import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,6 +35,7 @@ from depthq.pipeline.sweep import Sweep, retarget, widened
 from depthq.report.build import build_report
 from depthq.report.cells import mean_interval
 from depthq.report.tables import interval, markdown
+from depthq.train.folder import read_metrics
 
 PROG = "python -m depthq.experiments.sizing"
 CANYONS = {"hard": "hard/val:1000-1019", "paper": "val:1000-1019"}  # the choice canyons of each family
@@ -83,6 +83,7 @@ class Point:
     distance: float  # mean m to the first collision over the canyons
     ends: int  # canyons whose end it reached
     epoch_s: float  # median seconds of a training epoch (as trained: one core, maybe beside other work)
+    best_epoch: int | None = None  # the epoch of its lowest validation loss (what a Coll-Q-Net acts with)
 
     @property
     def variant(self) -> tuple[str, int, int]:
@@ -101,13 +102,13 @@ def points(out: Path) -> list[Point]:
         if not (model / "config.json").is_file() or not evaluation_done(summary_file.parent):
             continue  # a reference policy's evaluation (heuristic, OU), or one to drive again
         config, summary = read_config(model), read_json(summary_file)["summary"]
-        with (model / "metrics.csv").open() as f:
-            seconds = [float(row["seconds"]) for row in csv.DictReader(f)]
+        logged = read_metrics(model)
         train = config["train"]
         found.append(Point(str(dataset_record(config).family), train["model"], int(train["runs"]),
                            int(train["seed"]), int(config["head"]["hidden"]), int(train["epochs"]),
                            float(summary["distance_to_collision_mean"]), int(summary["reached_end"]),
-                           float(np.median(seconds))))
+                           float(np.nanmedian(logged["seconds"])),
+                           int(logged["epoch"][np.argmin(logged["val_loss"])])))
     return found
 
 
@@ -152,6 +153,7 @@ def compare(found: list[Point]) -> list[dict[str, object]]:
             "families": families, "pairs": sum(f["pairs"] for f in families.values()),
             "as_far": None if None in verdicts else all(verdicts),
             "epoch_s": float(np.median([p.epoch_s for p in cells.values()])),
+            "best_epochs": sorted(p.best_epoch for p in cells.values() if p.best_epoch is not None),
         })
     return rows
 
@@ -167,6 +169,17 @@ def choice(rows: list[dict[str, object]], net: str) -> dict[str, object] | None:
     if not mine or any(r["as_far"] is None for r in mine):
         return None
     return min((r for r in mine if r["as_far"]), key=lambda r: _cost(net, int(r["hidden"]), int(r["epochs"])))
+
+
+def same_net_budget(row: dict[str, object], budgets: tuple[int, ...] = EPOCHS["depth"]) -> int | None:
+    """The fewest epochs that train every model of a Coll-Q-Net variant into the same net it acts with
+    now: it acts with its best epoch, and nothing in its training depends on the budget (no schedule,
+    one random stream), so a budget of E epochs gives the same weights wherever its best epoch ≤ E.
+    None while a model's best epoch is unknown."""
+    best = row["best_epochs"]
+    if not best or len(best) < row["pairs"]:
+        return None
+    return min(e for e in (*budgets, int(row["epochs"])) if e >= max(best))
 
 
 def _difference(mean: float | None, ci: tuple[float, float] | None) -> str:
@@ -199,6 +212,9 @@ def report(out: Path) -> str:
                        else f"{chosen['hidden']} wide, {chosen['epochs']} epochs")
         lines.append(f"- {net}: the reference's spread between seeds: {spreads}; "
                      f"the cheapest that drives as far in every family: {chosen_text}")
+        if net == "coll" and chosen is not None:
+            lines.append(f"  - its best epochs {chosen['best_epochs']}: the same nets in "
+                         f"{same_net_budget(chosen)} epochs (a Coll-Q-Net acts with its best epoch)")
     text = "\n".join(lines) + "\n"
     atomic_write_bytes(out / "report.md", text.encode())
     write_json(out / "sizing.json", {"rows": rows, "choices": {n: choice(rows, n) for n in NETS},
