@@ -12,6 +12,7 @@ import pytest
 
 from depthq.data.manifest import Dataset
 from depthq.experiments import looks
+from depthq.lock import exclusive
 
 TOY = [
     "--preset", "smoke", "--runs", "3", "--seeds", "0", "--train-looks", "textured",
@@ -104,6 +105,9 @@ def test_the_looks_report_says_not_yet_measured_for_what_is_missing(tmp_path: Pa
                             if key not in ("Q-net", "trained in", "labeller", "seeds", "metric"))
     assert looks.main(["report", str(tmp_path / "none")]) == 2
     assert not (tmp_path / "none").exists()
+    with exclusive(tmp_path, "OUT"):  # one writer per experiment folder: another process writes there
+        assert looks.main(["report", str(tmp_path)]) == 2
+    assert not (tmp_path / "report.md").exists()
 
 
 def test_the_labeller_error_is_the_camera_labels_metric() -> None:

@@ -58,6 +58,7 @@ from depthq.experiments import camera_labels
 from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
 from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
+from depthq.lock import exclusive
 from depthq.nets.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
@@ -732,6 +733,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.action == "table":
             print(table(args.out, args.runs, seeds, train_looks, drive_looks, args.method))
             return 0
+        if args.action != "run" and not args.out.is_dir():
+            raise ConfigError(f"{args.out}: no such folder (make it with `{PROG} run {args.out}`)")
+        with exclusive(args.out, "OUT"):  # one writer per experiment folder
+            return write(seeds, train_looks, drive_looks)
+
+    def write(seeds: tuple[int, ...], train_looks: tuple[str, ...], drive_looks: tuple[str, ...]) -> int:
         if args.action == "diagnose":
             return diagnose(args.out, runs=args.runs, seeds=seeds, train_looks=train_looks,
                             drive_looks=drive_looks, nets=_looks(args.nets), choose=args.choose,
