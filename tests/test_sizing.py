@@ -30,7 +30,7 @@ def _points(distance: dict[tuple[int, int], float], net: str = "depth",
             for family, runs, seed in itertools.product(sizing.CANYONS, sizing.SIZES, sizing.SEEDS)]
 
 
-def test_the_cheapest_variant_that_drives_as_far_is_chosen() -> None:
+def test_the_cheapest_variant_that_drives_as_far_is_chosen(tmp_path) -> None:
     distance = {sizing.REFERENCE: 20.0, (512, 40): 15.0, (1024, 20): 19.5, (1024, 40): 20.5, (2048, 40): 21.0}
     rows = sizing.compare(_points(distance))
     by = {(r["hidden"], r["epochs"]): r for r in rows}
@@ -43,6 +43,8 @@ def test_the_cheapest_variant_that_drives_as_far_is_chosen() -> None:
 
     partial = [p for p in _points(distance) if not (p.hidden == 1024 and p.seed == 1)]
     assert sizing.choice(sizing.compare(partial), "depth") is None  # a variant lacks pairs: no choice yet
+    sizing.figure(_points(distance) + _points({sizing.REFERENCE: 18.0}, net="coll"), tmp_path / "sizing.png")
+    assert (tmp_path / "sizing.png").stat().st_size > 20_000
 
 
 def test_a_variant_must_drive_as_far_in_every_family() -> None:
@@ -61,6 +63,7 @@ def test_one_writer_per_experiment_folder(tmp_path) -> None:
     with exclusive(out):
         assert sizing.main(["report", str(out)]) == 2  # another process writes there
     assert sizing.main(["report", str(out)]) == 0 and (out / "report.md").is_file()
+    assert (out / "sizing.png").is_file()  # drawn with nothing measured yet
 
 
 def test_a_coll_q_nets_epochs_do_not_depend_on_its_budget(small_dataset, tmp_path) -> None:

@@ -8,7 +8,7 @@ size and seed; the cheapest variant that drives as far in every family (there, i
 difference no worse than minus the reference's spread between seeds) is the one to make the default.
 
     python -m depthq.experiments.sizing run OUT       # the four sweeps, resumed when rerun
-    python -m depthq.experiments.sizing report OUT    # OUT/report.md and OUT/sizing.json
+    python -m depthq.experiments.sizing report OUT    # OUT/report.md, OUT/sizing.json, OUT/sizing.png
 
 OUT/<family>-<net>/ is a `depthq sweep` folder (the Coll-Q-Net sweeps read the Depth-Q-Net sweeps'
 data through a symlink). The reference width is pinned, so the folders keep their names when the
@@ -22,7 +22,11 @@ import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import matplotlib
 import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
 
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError, guarded
@@ -188,6 +192,39 @@ def _difference(mean: float | None, ci: tuple[float, float] | None) -> str:
     return f"{mean:+.2f}" + ("" if ci is None else f" [{ci[0]:+.2f}, {ci[1]:+.2f}]")
 
 
+def figure(found: list[Point], path: Path) -> None:
+    """m to the first collision against the hidden width, a panel per family and size: each epoch
+    budget's mean over seeds (the bars span the seeds), Coll-Q-Net dashed."""
+    fig, axes = plt.subplots(len(CANYONS), len(SIZES), figsize=(5 * len(SIZES), 3.6 * len(CANYONS)),
+                             sharex=True, squeeze=False)
+    names = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}
+    for (family, runs), ax in zip([(f, n) for f in CANYONS for n in SIZES], axes.flat, strict=True):
+        for net, epochs in sorted({(p.net, p.epochs) for p in found}):
+            mine = [p for p in found if (p.net, p.epochs, p.family, p.runs) == (net, epochs, family, runs)]
+            widths = sorted({p.hidden for p in mine})
+            if not widths:
+                continue
+            values = [[p.distance for p in mine if p.hidden == w] for w in widths]
+            mean = np.array([np.mean(v) for v in values])
+            spread = [mean - [min(v) for v in values], [max(v) for v in values] - mean]
+            ax.errorbar(widths, mean, yerr=spread, capsize=3, ls="-" if net == "depth" else "--",
+                        marker="o" if net == "depth" else "s", label=f"{names[net]}, {epochs} epochs")
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(WIDTHS, [str(w) for w in WIDTHS])
+        ax.set_title(f"{family} val canyons, {runs} runs")
+        ax.set_ylabel("m to the first collision")
+        ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("hidden width")
+    legend = {label: handle for ax in axes.flat for handle, label in zip(*ax.get_legend_handles_labels(),
+                                                                         strict=True)}
+    if legend:
+        fig.legend(legend.values(), legend.keys(), loc="lower center", ncol=len(legend), fontsize=8)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def report(out: Path) -> str:
     """OUT/report.md (and the same as OUT/sizing.json): one row per variant, and each network's choice."""
     found = points(out)
@@ -201,7 +238,8 @@ def report(out: Path) -> str:
              r["pairs"], {None: "not yet", True: "yes", False: "no"}[r["as_far"]], f"{r['epoch_s']:.2f}"]
             for r in rows]
     table = markdown([dict(zip(head, map(str, cells), strict=True)) for cells in body])
-    lines = ["# The default head's size, on val canyons", "", table]
+    lines = ["# The default head's size, on val canyons", "", table, "", "![m to the first collision against "
+             "the hidden width](sizing.png)", ""]
     for net in NETS:
         chosen = choice(rows, net)
         families = next((r["families"] for r in rows
@@ -219,6 +257,7 @@ def report(out: Path) -> str:
     atomic_write_bytes(out / "report.md", text.encode())
     write_json(out / "sizing.json", {"rows": rows, "choices": {n: choice(rows, n) for n in NETS},
                                      "points": [asdict(p) for p in found]})
+    figure(found, out / "sizing.png")
     return text
 
 
