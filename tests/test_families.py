@@ -203,3 +203,23 @@ def test_fresh_streams_are_test_sets_no_project_code_draws_from(tmp_path):
     result = evaluate("heuristic", tmp_path, EvalConfig(canyons=("hard/stream7:0",), time_limit_s=2.0),
                       workers=1, progress=False)
     assert [r["canyon"] for r in result["runs"]] == ["hard/stream7:0"] and result["runs"][0]["steps"] > 0
+
+
+def test_a_folder_holding_only_data_is_claimed_and_one_with_more_is_refused(tmp_path):
+    """The head-size experiment links one sweep's data into another's folder before the sweep runs."""
+    from depthq.pipeline.presets import PRESETS
+    from depthq.pipeline.stages import _claim
+
+    linked = tmp_path / "coll"
+    linked.mkdir()
+    (tmp_path / "depth_data").mkdir()
+    (linked / "data").symlink_to(tmp_path / "depth_data")
+    _claim(linked, PRESETS["smoke"])
+    assert read_json(linked / "reproduce.json")["sweep"]["name"] == "smoke"
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "data").mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match="not a depthq reproduce folder"):
+        _claim(other, PRESETS["smoke"])
+    assert not (other / "reproduce.json").exists()

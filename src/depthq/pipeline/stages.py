@@ -171,7 +171,9 @@ def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str
 
 def _claim(out: Path, sweep: Sweep) -> None:
     """Refuse a folder holding results of another setup; mark a new one as this sweep's. The grid
-    (networks, sizes, seeds, variants) may differ: models already there are reused."""
+    (networks, sizes, seeds, variants) may differ: models already there are reused. A folder holding
+    only `data` (another sweep's dataset linked in, as the head-size experiment does) is claimed: the
+    collection stage reuses it only if it holds the runs this sweep asks for."""
     marker = out / "reproduce.json"
     if marker.is_file():
         held = sweep_setup(read_json(marker))
@@ -182,7 +184,7 @@ def _claim(out: Path, sweep: Sweep) -> None:
                 f"{out} holds results of {held.get('name')!r} with another setup ({'; '.join(differ)}); "
                 f"use another --out for {sweep.name!r}"
             )
-    elif out.exists() and any(out.iterdir()):
+    elif out.exists() and any(p.name != "data" for p in out.iterdir()):
         raise ConfigError(f"{out} exists and is not a depthq reproduce folder; use another --out")
     write_json(marker, {"sweep": sweep.record(), "provenance": provenance()})
 
