@@ -16,6 +16,7 @@ from depthq.experiments import weights_check
 from depthq.nets.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_fails,
+    average_margin,
     chosen_weights,
     read_config,
     read_sidecar,
@@ -76,8 +77,8 @@ def test_bad_input_is_named_before_any_work(toy_nets: dict[str, Path], tmp_path:
     assert not any(tmp_path.iterdir())
 
 
-def test_a_weight_average_that_fails_its_check_is_not_acted_with(toy_nets: dict[str, Path],
-                                                                  tmp_path: Path) -> None:
+def test_a_weight_average_that_fails_its_check_is_not_acted_with(toy_nets: dict[str, Path], tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "depth"
     shutil.copytree(toy_nets["depth"], folder)
     config = read_config(folder)
@@ -97,6 +98,9 @@ def test_a_weight_average_that_fails_its_check_is_not_acted_with(toy_nets: dict[
         assert average_fails(folder, config) is fails
     assert chosen_weights(config, None, folder) == "final"
     assert chosen_weights(config, "average", folder) == "average"
+    assert average_margin(folder, config) == pytest.approx(AVERAGE_TOLERANCE_SE + 0.1)
+    assert weights_check.main(["--margins", str(folder)]) == 0  # the survey of many checkpoints, here one
+    assert f"| {folder} | {AVERAGE_TOLERANCE_SE + 0.1:+.2f} | final |" in capsys.readouterr().out
     assert QNetPolicy.from_checkpoint(folder).weights == "last"
     assert QNetPolicy.from_checkpoint(folder, weights="average").weights == "average"  # asked for: given
     assert not evaluation_done(driven)  # driven with the average: to drive again

@@ -4,6 +4,7 @@
     python -m depthq.experiments.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
     python -m depthq.experiments.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT
     python -m depthq.experiments.weights_check CHECKPOINT --parts
+    python -m depthq.experiments.weights_check --margins CHECKPOINT [CHECKPOINT ...]
 
 For each weights choice (default: final, best and, where the training kept it, average): the bins it
 predicts as 0 for every candidate action on every frame (dead: a 0 is no reading, so its policy never
@@ -14,7 +15,9 @@ frames of the checkpoint's dataset (from the feature cache). With
 `--canyons`, each choice is also driven there (`depthq evaluate --weights W`, into OUT/<weights>/):
 the distance to the first collision beside what the frames show. With `--parts` (a depth_first head),
 the score spread of every pairing of one choice's perception with another's dynamics: which part of a
-choice moves its actions. Make choices on `val` canyons.
+choice moves its actions. `--margins`: for any number of checkpoints, only how far each one's weight
+average's validation loss is above its final weights' and the weights it acts with. Make choices on
+`val` canyons.
 """
 
 from __future__ import annotations
@@ -35,9 +38,17 @@ from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.lock import exclusive
-from depthq.nets.checkpoint import dataset_record, read_config, weights_stem
+from depthq.nets.checkpoint import (
+    AVERAGE_TOLERANCE_SE,
+    average_margin,
+    chosen_weights,
+    dataset_record,
+    read_config,
+    weights_stem,
+)
 from depthq.nets.heads import DepthFirstHead
 from depthq.policies.qnet import QNetPolicy
+from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig
 from depthq.train.features import load_features
 
@@ -164,9 +175,27 @@ def table(measured: dict[str, dict[str, Any]], driven: dict[str, dict[str, Any]]
     return "\n".join(lines)
 
 
+def margins_table(checkpoints: list[Path]) -> str:
+    """Markdown, a row per checkpoint: its weight average's validation loss over the final weights', in
+    standard errors (`average_margin`; the tolerance `AVERAGE_TOLERANCE_SE`), and the weights it acts
+    with by default, largest margin first."""
+    rows = []
+    for folder in checkpoints:
+        record = read_config(folder)
+        margin = average_margin(folder, record)
+        rows.append((margin if margin is not None else -np.inf, {
+            "checkpoint": str(folder), "average − final, SE": "–" if margin is None else f"{margin:+.2f}",
+            "acts with": chosen_weights(record, None, folder)}))
+    rows.sort(key=lambda r: -r[0])
+    return (f"tolerance: {AVERAGE_TOLERANCE_SE:+.2f} SE\n\n" + markdown([row for _, row in rows]))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
-    parser.add_argument("checkpoint", type=Path, help="a checkpoint folder")
+    parser.add_argument("checkpoint", type=Path, nargs="+",
+                        help="a checkpoint folder (with --margins: any number of them)")
+    parser.add_argument("--margins", action="store_true",
+                        help="only each checkpoint's weight-average margin and the weights it acts with")
     parser.add_argument("--weights", default=None,
                         help="weights choices, comma-separated: final, best, average, epoch:N (default: "
                         "final, best and average where kept)")
@@ -179,6 +208,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def work() -> int:
+        if args.margins:
+            print(margins_table(args.checkpoint))
+            return 0
+        if len(args.checkpoint) > 1:
+            raise ConfigError(f"one checkpoint at a time, got {len(args.checkpoint)} (or --margins)")
+        args.checkpoint = args.checkpoint[0]
         weights = available(args.checkpoint) if args.weights is None else tuple(args.weights.split(","))
         for choice in weights:
             weights_stem(choice)  # a bad choice fails here, before any work
