@@ -46,6 +46,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 from tqdm import tqdm
 
+from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
@@ -270,6 +271,19 @@ def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], driv
                 write_json(path, record)
 
 
+# What to do when a checked record of this experiment (a net's predictions or agreement) is corrupted.
+FIX = f"remove it and rerun `{PROG} run` (predictions) or `{PROG} diagnose` (agreement) to measure it again"
+
+
+def _drive(checkpoint: Path, folder: Path, config: EvalConfig, workers: int, progress: bool,
+           device: str) -> None:
+    """`checkpoint` evaluated into `folder` unless a finished evaluation of it as it acts now is there."""
+    if not evaluation_done(folder):
+        print(f"evaluate {checkpoint} in the {config.look} look → {folder}", flush=True)
+        evaluate(str(checkpoint), folder, config, workers=workers, progress=progress, device=device,
+                 video=False)
+
+
 def prediction_path(out: Path, look: str, drive: str, net: str, seed: int) -> Path:
     """Where the offline metric of `net` (seed `seed`) trained in `look`, on `drive`'s validation runs,
     is kept."""
@@ -283,7 +297,7 @@ def measure_predictions(out: Path, runs: int, seeds: tuple[int, ...], train_look
     well it predicts in a look, apart from how it drives there (resumed: a record made with the
     weights its checkpoint acts with now is kept)."""
     for drive in drive_looks:
-        data = Path(out) / f"val_{drive}" / "data"
+        data, dataset = Path(out) / f"val_{drive}" / "data", None
         for look in train_looks:
             for seed in seeds:
                 for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
@@ -291,13 +305,13 @@ def measure_predictions(out: Path, runs: int, seeds: tuple[int, ...], train_look
                     if not (checkpoint / CONFIG).is_file():
                         continue
                     stem = weights_stem(chosen_weights(read_config(checkpoint), None, checkpoint))
-                    if path.is_file() and read_json(path)["weights"] == stem:
+                    if path.is_file() and read_checked_json(path, FIX)["weights"] == stem:
                         continue
                     print(f"offline metric of {checkpoint} in the {drive} look → {path}", flush=True)
-                    dataset = Dataset.open(data)
+                    dataset = dataset or Dataset.open(data)
                     record = offline_metric(checkpoint, dataset)
-                    write_json(path, {**record, "checkpoint": str(checkpoint), "data": str(data),
-                                      "data_fingerprint": dataset.fingerprint()})
+                    write_checked_json(path, {**record, "checkpoint": str(checkpoint), "data": str(data),
+                                              "data_fingerprint": dataset.fingerprint()})
 
 
 def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
@@ -333,12 +347,9 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
             config = replace(driving, look=drive)
             for seed in seeds:
                 for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
-                    folder = out / look / f"eval_{drive}" / f"{net}_s{seed}"
-                    if not (checkpoint / CONFIG).is_file() or evaluation_done(folder):
-                        continue
-                    print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
-                    evaluate(str(checkpoint), folder, config, workers=workers, progress=progress,
-                             device=device, video=False)
+                    if (checkpoint / CONFIG).is_file():
+                        _drive(checkpoint, out / look / f"eval_{drive}" / f"{net}_s{seed}", config,
+                               workers, progress, device)
     measure_labellers(out, preset, train_looks, drive_looks, method, val_runs, workers, progress)
     measure_predictions(out, runs, seeds, train_looks, drive_looks, method)
     print(table(out, runs, seeds, train_looks, drive_looks, method))
@@ -380,17 +391,14 @@ def diagnose(out: Path, *, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
                     folder = where / f"{net}_s{seed}"
                     if net not in nets or not (checkpoint / CONFIG).is_file():
                         continue
-                    if not evaluation_done(folder):
-                        print(f"evaluate {checkpoint} in the {drive} look → {folder}", flush=True)
-                        evaluate(str(checkpoint), folder, replace(driving, look=drive), workers=workers,
-                                 progress=progress, device=device, video=False)
+                    _drive(checkpoint, folder, replace(driving, look=drive), workers, progress, device)
                     path = agreement_file(where, folder.name, oracle, ".json")
                     weights = read_json(folder / "summary.json")["policy"]["weights"]
-                    if path.is_file() and read_json(path)["weights"] == weights:
+                    if path.is_file() and read_checked_json(path, FIX)["weights"] == weights:
                         continue
                     print(f"agreement of {folder} → {path}", flush=True)
                     summary = measure_agreement(folder, oracle, where, predictions=True)
-                    write_json(path, {**summary, "weights": weights})
+                    write_checked_json(path, {**summary, "weights": weights})
     print(markdown(diagnosis_rows(out, seeds, train_looks, drive_looks, nets)))
     return 0
 
@@ -414,7 +422,7 @@ def diagnosis_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: t
         for look in train_looks:
             for drive in drive_looks:
                 where = diagnosis_folder(out, look, drive)
-                found = [read_json(p) for seed in seeds
+                found = [read_checked_json(p, FIX) for seed in seeds
                          if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
                 row = {"Q-net": NETS[net], "trained in": look, "driven in": drive, "seeds": str(len(found))}
                 for key, (title, spec) in DIAGNOSIS.items():
@@ -533,7 +541,7 @@ def prediction_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: 
             row, means, metric = {"Q-net": label, "trained in": look}, {}, "–"
             for drive in drive_looks:
                 paths = [prediction_path(out, look, drive, net, seed) for seed in seeds]
-                found = [read_json(p) for p in paths if p.is_file()]
+                found = [read_checked_json(p, FIX) for p in paths if p.is_file()]
                 values = [float(r["value"]) for r in found]
                 metric = found[0]["metric"] if found else metric
                 means[drive] = float(np.mean(values)) if values else None

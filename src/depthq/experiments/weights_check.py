@@ -213,8 +213,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if len(args.checkpoint) > 1:
             raise ConfigError(f"one checkpoint at a time, got {len(args.checkpoint)} (or --margins)")
-        args.checkpoint = args.checkpoint[0]
-        weights = available(args.checkpoint) if args.weights is None else tuple(args.weights.split(","))
+        checkpoint = args.checkpoint[0]
+        weights = available(checkpoint) if args.weights is None else tuple(args.weights.split(","))
         for choice in weights:
             weights_stem(choice)  # a bad choice fails here, before any work
         if args.frames < 1:
@@ -222,9 +222,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.canyons is not None and args.out is None:
             raise ConfigError("--canyons needs --out, the evaluations' folder")
         with exclusive(args.out) if args.out is not None else contextlib.nullcontext():
-            measured = measure(args.checkpoint, weights, args.frames)
-            mixed = parts(args.checkpoint, weights, args.frames) if args.parts else None
-            driven = drive(args.checkpoint, weights, args.canyons, args.out) if args.canyons else None
+            measured = measure(checkpoint, weights, args.frames)
+            mixed = parts(checkpoint, weights, args.frames) if args.parts else None
+            driven = drive(checkpoint, weights, args.canyons, args.out) if args.canyons else None
             if args.out is not None:
                 write_json(args.out / "weights_check.json",
                            {"measured": measured, "parts": mixed, "driven": driven})

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 import warnings
 from dataclasses import dataclass
@@ -149,7 +150,8 @@ def average_margin(folder: Path, record: dict[str, Any]) -> float | None:
     if samples < 1 or not all(isinstance(r.get(k), (int, float)) for r in (average, final) for k in keys):
         return None
     error = ((average["val_loss_std"] ** 2 + final["val_loss_std"] ** 2) / samples) ** 0.5
-    return (average["val_loss"] - final["val_loss"]) / error if error > 0 else 0.0
+    difference = average["val_loss"] - final["val_loss"]
+    return difference / error if error > 0 else math.copysign(math.inf, difference) if difference else 0.0
 
 
 def average_fails(folder: Path, record: dict[str, Any]) -> bool:
