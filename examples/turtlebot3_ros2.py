@@ -46,7 +46,6 @@ class DepthqDriver(Node):
         twist = Twist()
         twist.linear.x, twist.angular.z = command.twist.linear_x, command.twist.angular_z
         self.cmd.publish(twist)
-        self.core.published(command, self.now())
 
     def on_tick(self) -> None:
         command = self.core.tick(self.now())

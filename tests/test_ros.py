@@ -12,6 +12,8 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -132,7 +134,6 @@ def test_the_driver_decides_at_the_policys_rate_on_the_newest_frame_and_stops_wh
             command = driver.tick(now)
             if command is not None and command.reason == "decision":
                 assert command.stamp == newest and command.twist.linear_x == LINEAR_SPEED
-                driver.published(command, now)
                 decisions.append(now)
             elif command is not None:
                 stops.append((now, command))
@@ -140,11 +141,145 @@ def test_the_driver_decides_at_the_policys_rate_on_the_newest_frame_and_stops_wh
     assert driver.stats.rate == pytest.approx(4.0, rel=0.05)
     assert len(stops) == 1 and stops[0][1] == Command(STOP, "watchdog")
     assert 0.44 - 1e-9 <= stops[0][0] - newest <= 0.46 + 1e-9  # out 40 ms before the 0.5 s at the latest
-    driver.on_frame(Frame(4.0, jpegs[0]), 4.6)  # 0.6 s old: stale, never decided on
+    assert driver.on_frame(Frame(4.0, jpegs[0]), 4.6).startswith("stale")  # 0.6 s old: never decided on
     assert driver.stats.stale == 1 and driver.tick(4.75) is None
     assert driver.stop() == Command(STOP, "stop")
     driver.on_frame(Frame(5.0, jpegs[0]), 5.0)
     assert driver.tick(5.0) is None  # stopped for good: a frame after the stop moves nothing
+
+
+class _Steer:
+    """A policy of the test's own: steers by the frame's brightness, or raises while `broken`."""
+
+    name = "steer"
+    broken = False
+
+    def reset(self, seed: int | None = None) -> None: ...
+
+    def describe(self) -> dict:
+        return {"name": self.name}
+
+    def act(self, obs: dict) -> float:
+        if self.broken:
+            raise RuntimeError("the policy's device is gone")
+        return float(obs["image"].mean()) / 255.0
+
+
+def _huge_jpeg(width: int, height: int) -> bytes:
+    """A JPEG whose header says width × height (the pixels do not follow: it must be refused unread)."""
+    data = bytearray(_jpeg(np.zeros((8, 8, 3), np.uint8)))
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5: sof + 9] = height.to_bytes(2, "big") + width.to_bytes(2, "big")
+    return bytes(data)
+
+
+BAD_FRAMES = {  # what a camera (or a broken driver) may send, each with what the node must say of it
+    "empty": (Frame(0.0, b""), "bad frame"),
+    "random bytes": (Frame(0.0, np.random.default_rng(0).bytes(5000)), "bad frame"),
+    "rgba8": (Frame(0.0, bytes(48 * 64 * 4), "rgba8", 48, 64, 64 * 4), "bad frame"),
+    "0 × 0": (Frame(0.0, b"", "rgb8", 0, 0, 0), "bad frame"),
+    "8000 × 6000": (Frame(0.0, _huge_jpeg(8000, 6000)), "bad frame"),
+    "stamped 30 s ahead": (Frame(30.0, _jpeg(np.full((48, 64, 3), 99, np.uint8))), "from another clock"),
+    "stamped 5 s ago": (Frame(-5.0, _jpeg(np.full((48, 64, 3), 99, np.uint8))), "stale"),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_FRAMES))
+def test_a_frame_the_node_cannot_use_is_counted_and_never_refreshes_the_watchdog(kind: str) -> None:
+    """Good frames until 1 s, then only the bad kind at 30 Hz: it is dropped, saying why, never raises,
+    and the zero twist still leaves within 0.5 s of the last good frame; good frames drive again."""
+    bad, why = BAD_FRAMES[kind]
+    good = _jpeg(np.full((48, 64, 3), 128, np.uint8))
+    driver = RobotDriver(_Steer(), DriverConfig(decision_hz=4.0))
+    stops, moves = [], []
+    for k in range(int(3.0 * 300)):
+        now = k / 300
+        if k % 10 == 0:
+            frame = Frame(now, good) if now < 1.0 or now >= 2.0 else Frame(now + bad.stamp, bad.data,
+                                                                         bad.encoding, bad.height, bad.width,
+                                                                         bad.step)
+            dropped = driver.on_frame(frame, now + 0.002)
+            assert (dropped is None) == (now < 1.0 or now >= 2.0)
+            assert dropped is None or dropped.startswith(why), dropped
+        if k % 6 == 0 and (command := driver.tick(now)) is not None:
+            (moves if command.twist.linear_x else stops).append((now, command))
+    assert [c.reason for _, c in stops] == ["watchdog"]
+    last_good = 0.99 - 0.99 % (10 / 300)
+    assert 0.4 <= stops[0][0] - last_good <= 0.5
+    assert any(t < 1.0 for t, _ in moves) and any(t >= 2.0 for t, _ in moves)  # driven again on good frames
+    assert not any(1.0 <= t < 2.0 and c.stamp >= 1.0 for t, c in moves)
+    counts = driver.stats
+    assert counts.bad + counts.stale + counts.future == 30
+
+
+def test_a_clock_that_jumps_back_stops_the_robot_until_frames_of_the_new_clock_come() -> None:
+    """A simulator restarted (or a bag looped) under /use_sim_time: its clock runs back from 100 s to 0.
+    Everything from the old clock is dropped, one zero twist goes out at once, and the frames of the new
+    clock are decided on."""
+    driver = RobotDriver(_Steer(), DriverConfig(decision_hz=4.0))
+    image = _jpeg(np.full((48, 64, 3), 128, np.uint8))
+    commands = []
+    for clock in (100.0, 0.0):
+        for k in range(300):
+            now = clock + k / 300
+            if k % 10 == 0 and k >= 150 * (clock == 0.0):  # the new clock's frames start 0.5 s after the jump
+                driver.on_frame(Frame(now, image), now)
+            if k % 6 == 0 and (command := driver.tick(now)) is not None:
+                commands.append((now, command))
+    reasons = [(t, c.reason) for t, c in commands if c.stamp is None]
+    assert reasons == [(0.0, "clock jumped back")] and driver.stats.clock_jumps == 1
+    after = [t for t, c in commands if c.stamp is not None and t < 100]
+    assert after and min(after) >= 0.5 and len(after) in (2, 3)  # decided again, at 4 Hz, on the new clock
+    assert driver.on_frame(Frame(100.5, image), 1.0).startswith("from another clock")  # a late old frame
+
+
+def test_a_failing_policy_stops_the_robot_and_a_stalled_decision_loop_is_stopped_by_the_watchdog() -> None:
+    policy = _Steer()
+    driver = RobotDriver(policy, DriverConfig(decision_hz=4.0))
+    image = _jpeg(np.full((48, 64, 3), 128, np.uint8))
+    driver.on_frame(Frame(0.0, image), 0.0)
+    assert driver.tick(0.0).reason == "decision"
+    policy.broken = True
+    driver.on_frame(Frame(0.25, image), 0.25)
+    command = driver.decide(0.25)
+    assert command.reason == "decision failed" and driver.commit(command, 0.25)
+    assert driver.stats.failed == 1 and "device is gone" in driver.failure
+    policy.broken = False
+    driver.on_frame(Frame(0.5, image), 0.5)
+    assert driver.tick(0.5).reason == "decision"
+    # frames keep coming but the decision loop stops: the robot must not drive on a 0.7 s old decision
+    stops = []
+    for k in range(26, 70):
+        now = k / 50
+        driver.on_frame(Frame(now, image), now)
+        if (command := driver.watch(now)) is not None:
+            stops.append((now, command.reason))
+    assert stops == [(1.2, "decisions stalled")]  # 0.25 s period + 0.44 s after the frame of 0.5 s
+    decided = driver.decide(1.2)
+    assert decided.reason == "decision" and driver.commit(decided, 1.2)  # the loop is back: it drives again
+    driver.on_frame(Frame(1.5, image), 1.5)
+    late = driver.decide(1.5)
+    assert late.stamp == 1.5 and not driver.commit(late, 1.5 + 0.45)  # the watchdog gave its frame up
+
+
+def test_the_node_loops_survive_their_bodies_exceptions_and_the_watchdogs_ends_it() -> None:
+    from depthq.deploy.ros_drive import guarded_loop
+
+    calls, errors, done = [], [], threading.Event()
+
+    def body() -> None:
+        calls.append(time.monotonic())
+        if len(calls) in (2, 3):
+            raise RuntimeError(f"call {len(calls)}")
+        if len(calls) == 6:
+            done.set()
+
+    guarded_loop(body, 0.01, done, errors.append, fatal=False)
+    assert len(calls) == 6 and [str(e) for e in errors] == ["call 2", "call 3"]  # went on after each
+    calls.clear(), errors.clear()
+    done.clear()
+    guarded_loop(body, 0.01, done, errors.append, fatal=True)
+    assert len(calls) == 2 and [str(e) for e in errors] == ["call 2"]  # a fatal loop ends at its first
 
 
 @pytest.mark.slow
@@ -315,6 +450,124 @@ def test_a_policy_drives_the_simulated_robot_through_a_real_master(
         graph.stop("drive2")
         assert "watchdog: zero twist" in graph.log("drive2")
     assert not graph.master_up() and all(p.poll() is not None for p in graph.procs.values())  # nothing left
+
+
+def _drive_the_test_camera(graph: RosGraph, checkpoint: Path, *flags: str, drive: list[str] | None = None,
+                           during=None) -> tuple[dict, str]:
+    """tests/ros_camera.py (a camera and a base) with `flags`, and `depthq ros drive` on it (`drive`: its
+    argv, else the CLI's); `during(graph)` is called once the drive has decided twice. The camera's
+    record and the drive's log."""
+    graph.start("camera", [sys.executable, str(ROOT / "tests" / "ros_camera.py"), *flags])
+    graph.wait_for(lambda: "ready" in graph.log("camera"), 60, "the test camera")
+    topic = "/camera/image_raw" if "--raw" in flags else "/camera/image_raw/compressed"
+    args = ["ros", "drive", "--policy", str(checkpoint), "--image-topic", topic, "--log-every", "0.25"]
+    graph.start("drive", drive or [sys.executable, "-m", "depthq.cli", *args])
+    if during is not None:
+        graph.wait_for(lambda: decisions(graph.log("drive"))[0] >= 2, 60, "two decisions")
+        during(graph)
+    record = summary(graph.finish("camera", 90))
+    graph.stop("drive")
+    return record, graph.log("drive")
+
+
+def _after(twists: list, t: float, moving: bool) -> list[float]:
+    return [w for w, x, _ in twists if w > t and (x > 0) == moving]
+
+
+@pytest.mark.slow
+@needs_ros
+@pytest.mark.parametrize("flags", [(), ("--raw", "--jump")], ids=["compressed", "raw-and-clock-jump"])
+def test_no_frame_and_no_clock_jump_leaves_the_robot_driving(
+    toy_nets: dict[str, Path], tmp_path: Path, flags: tuple[str, ...]
+) -> None:
+    """Bad frames of every kind between good ones (ros_camera.py): the robot is driven on the good ones;
+    when they stop (the bad ones go on) a zero twist reaches it within 0.5 s, and it drives again when
+    they resume. With a clock that runs back (a restarted simulator): a zero twist at once, decisions
+    again on the new clock's frames. The node's log counts every kind and holds no traceback."""
+    with RosGraph(tmp_path) as graph:
+        record, log = _drive_the_test_camera(graph, toy_nets["depth"], *flags)
+    twists, last_good = record["twists"], record["last_good"]
+    assert any(w < last_good for w, x, _ in twists if x > 0), twists  # driven on the good frames
+    stop = min(_after(twists, last_good, moving=False))
+    assert stop - last_good <= 0.5, (stop, last_good)
+    assert not [w for w in _after(twists, stop, moving=True) if w < record["resume"]]  # bad frames: no move
+    assert [w for w in _after(twists, record["resume"], moving=True) if w < (record["jump"] or 1e9)]
+    if record["jump"] is not None:
+        moving_before = _after(twists, record["jump"] - 0.5, moving=True)
+        assert moving_before and min(moving_before) < record["jump"]  # it was driving when the clock ran back
+        stop = min(_after(twists, record["jump"], moving=False))
+        assert stop - record["jump"] <= 0.5
+        again = _after(twists, stop, moving=True)
+        assert again and min(again) >= record["jump"] + record["new_frames"]  # on the new clock's frames
+        assert log.count("the clock jumped back") == 1
+    assert "Traceback" not in log and "frames dropped" in log
+    counts = re.findall(r"(\d+) stale frames, (\d+) from another clock, (\d+) bad frames", log)[-1]
+    assert all(int(n) > 0 for n in counts), counts
+
+
+@pytest.mark.slow
+@needs_ros
+def test_a_watchdog_that_fails_stops_the_robot_and_ends_the_node_with_an_error(
+    toy_nets: dict[str, Path], tmp_path: Path
+) -> None:
+    """The watchdog's loop raises (injected) while the robot drives: a zero twist, a clear log line, the
+    node's exit status 1 for a supervisor to restart it."""
+    args = ["ros", "drive", "--policy", str(toy_nets["depth"]), "--log-every", "0.25"]
+    code = ("import sys, depthq.deploy.robot as robot\n"
+            "watch, calls = robot.RobotDriver.watch, [0]\n"
+            "def failing(self, now):\n"
+            "    calls[0] += 1\n"
+            "    if self.stats.decisions >= 4: raise RuntimeError('injected')\n"
+            "    return watch(self, now)\n"
+            "robot.RobotDriver.watch = failing\n"
+            f"from depthq.cli import main; sys.exit(main({args!r}))\n")
+    with RosGraph(tmp_path) as graph:
+        record, log = _drive_the_test_camera(graph, toy_nets["depth"], drive=[sys.executable, "-c", code])
+        assert graph.procs["drive"].returncode == 1
+    twists = record["twists"]
+    last_move = max(w for w, x, _ in twists if x > 0)
+    assert _after(twists, last_move, moving=False), twists  # the zero twist came after the last move
+    assert "the watchdog failed (RuntimeError: injected)" in log and "exits with an error" in log
+
+
+@pytest.mark.slow
+@needs_ros
+def test_when_the_master_goes_the_robot_gets_a_zero_twist_and_the_node_ends_with_an_error(
+    toy_nets: dict[str, Path], tmp_path: Path
+) -> None:
+    killed = []
+
+    def kill_master(graph: RosGraph) -> None:
+        killed.append(time.monotonic())
+        graph.stop("roscore")
+
+    with RosGraph(tmp_path) as graph:
+        record, log = _drive_the_test_camera(graph, toy_nets["depth"], during=kill_master)
+        assert graph.procs["drive"].returncode == 1
+    twists = record["twists"]
+    last_move = max(w for w, x, _ in twists if x > 0)
+    assert _after(twists, last_move, moving=False)
+    assert "is gone: zero twist, the node exits with an error" in log
+
+
+@pytest.mark.slow
+@needs_ros
+def test_one_drive_node_drives_two_simulator_runs_in_a_row(toy_nets: dict[str, Path], tmp_path: Path) -> None:
+    """A restarted `ros sim` under /use_sim_time: the clock runs back to 0; the node drives both runs."""
+    with RosGraph(tmp_path) as graph:
+        runs = []
+        for k in range(2):
+            graph.depthq(f"sim{k}", "ros", "sim", "--canyon", "val:1000", "--json", "--time-limit", "3")
+            graph.wait_for(lambda k=k: "ready" in graph.log(f"sim{k}"), 60, "ros sim")
+            if k == 0:
+                graph.depthq("drive", "ros", "drive", "--policy", str(toy_nets["depth"]),
+                             "--log-every", "0.5")
+            runs.append(summary(graph.finish(f"sim{k}", 90)))
+        graph.stop("drive")
+        log = graph.log("drive")
+    for run in runs:
+        assert run["end_reason"] == "time_limit" and run["commands"] >= 8 and run["path_length"] > 1.0, run
+    assert log.count("the clock jumped back") == 1 and "Traceback" not in log
 
 
 def test_the_paired_table_pools_measurements(tmp_path: Path) -> None:

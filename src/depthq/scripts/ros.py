@@ -21,10 +21,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="decisions per second [the rate the policy was trained at: its checkpoint's or "
                        "its ONNX file's]")
     drive.add_argument("--watchdog", type=float, default=0.5,
-                       help="seconds without a fresh frame after which the robot gets a zero twist "
-                       "[%(default)s]")
+                       help="seconds without a fresh frame that decodes after which the robot gets a zero "
+                       "twist [%(default)s]")
     drive.add_argument("--max-age", type=float, default=0.5,
-                       help="a frame stamped longer ago than this (s) is stale: not decided on [%(default)s]")
+                       help="a frame stamped longer ago than this (s) is stale, one stamped further ahead of "
+                       "this node's clock is from another clock: neither is decided on [%(default)s]")
+    drive.add_argument("--max-pixels", type=int, default=None,
+                       help="a frame of more pixels is dropped unread, as its decoding would hold up "
+                       "decisions [4096 × 3072]")
     drive.add_argument("--weights", default=None, help="a checkpoint's weights: best, last, average, epoch:N")
     drive.add_argument("--device", default="cpu", help="torch device for a checkpoint [cpu]")
     drive.add_argument("--node-name", default="depthq_drive", help="the ROS node's name [%(default)s]")
@@ -63,6 +67,8 @@ def _drive(args: argparse.Namespace) -> int:
     from depthq.deploy.ros_drive import DriveNodeConfig, run_drive_node
 
     driver = {"watchdog_s": args.watchdog, "max_age_s": args.max_age}
+    if args.max_pixels is not None:
+        driver["max_pixels"] = args.max_pixels
     DriverConfig(decision_hz=args.hz or 1.0, **driver)  # the flags checked before anything loads
     if args.hz is not None:
         driver["decision_hz"] = args.hz
@@ -70,8 +76,9 @@ def _drive(args: argparse.Namespace) -> int:
     if not args.log_every > 0:
         raise ConfigError(f"--log-every must be > 0 s, got {args.log_every}")
     config = DriveNodeConfig(args.image_topic, args.cmd_topic, args.node_name, args.dry_run, args.log_every)
-    print(run_drive_node(args.policy, config, driver, weights=args.weights, device=args.device))
-    return 0
+    status, line = run_drive_node(args.policy, config, driver, weights=args.weights, device=args.device)
+    print(line)
+    return status
 
 
 def _sim(args: argparse.Namespace) -> int:
