@@ -233,6 +233,17 @@ def test_a_clock_that_jumps_back_stops_the_robot_until_frames_of_the_new_clock_c
     assert driver.on_frame(Frame(100.5, image), 1.0).startswith("from another clock")  # a late old frame
 
 
+def test_a_clock_that_jumps_forward_stops_the_robot_until_frames_of_the_new_clock_come() -> None:
+    driver = RobotDriver(_Steer(), DriverConfig(decision_hz=4.0))
+    image = _jpeg(np.full((48, 64, 3), 128, np.uint8))
+    driver.on_frame(Frame(10.0, image), 10.0)
+    assert driver.tick(10.0).reason == "decision"
+    assert driver.on_frame(Frame(10.1, image), 40.0).startswith("stale")  # the old clock's last frame
+    assert driver.tick(40.0).reason == "watchdog"  # at the first check after the jump
+    driver.on_frame(Frame(40.1, image), 40.1)
+    assert driver.tick(40.1).reason == "decision"
+
+
 def test_a_failing_policy_stops_the_robot_and_a_stalled_decision_loop_is_stopped_by_the_watchdog() -> None:
     policy = _Steer()
     driver = RobotDriver(policy, DriverConfig(decision_hz=4.0))
