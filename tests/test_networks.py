@@ -96,9 +96,13 @@ def _preset_models() -> dict[str, list[str]]:
     return {name: [m.name for m in sweep.models()] for name, sweep in presets.PRESETS.items()}
 
 
-def test_a_registered_network_changes_no_preset(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_registered_network_changes_no_preset(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Presets name their networks: made with a third network registered, each trains the models it
-    trains without it; a sweep that names none (an ad-hoc one) trains every registered network."""
+    trains without it; a sweep that names none (an ad-hoc one, `depthq sweep` without --nets) trains
+    every registered network."""
+    from depthq.cli import main
     from depthq.pipeline.presets import get_preset
     from depthq.pipeline.sweep import Sweep
 
@@ -111,6 +115,9 @@ def test_a_registered_network_changes_no_preset(monkeypatch: pytest.MonkeyPatch)
     ad_hoc = Sweep("ad hoc", smoke.collect, smoke.subsets, smoke.seeds, smoke.train, smoke.canyons)
     assert ad_hoc.nets == ("depth", "coll", "clearance")
     assert {m.name for m in ad_hoc.models()} == {*before["smoke"], "clearance_n3_s0", "clearance_n6_s0"}
+    for given, trained in (([], True), (["--nets", "depth,coll"], False)):
+        assert main(["sweep", "--preset", "smoke", *given, "--dry-run", "--out", str(tmp_path / "x")]) == 0
+        assert ("  clearance_n3_s0 " in capsys.readouterr().out) == trained, given
 
 
 @pytest.mark.slow
