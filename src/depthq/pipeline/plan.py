@@ -13,13 +13,12 @@ from typing import Any
 from depthq.data.recorder import CollectConfig, exploration_env
 from depthq.evaluate.online import EvalConfig
 from depthq.flags import build_config, config_flags, get_path
-from depthq.pipeline.stages import build_stages, check_claim
+from depthq.pipeline.stages import REFERENCES, build_stages, check_claim
 from depthq.pipeline.sweep import Sweep
 from depthq.sim.canyon import PAPER
 from depthq.train.config import TrainConfig
 
 Flags = list[tuple[str, str | None]]  # (flag, its value as the flag takes it; None: a switch)
-REFERENCES = ("heuristic", "ou")  # the reference policies every sweep evaluates (`build_stages`)
 
 
 def flags_between(config: Any, base: Any, exclude: tuple[str, ...] = ()) -> Flags:

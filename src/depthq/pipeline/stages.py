@@ -45,6 +45,8 @@ from depthq.train.features import features_ready, load_features
 from depthq.train.folder import saved_epoch, settings_differing
 from depthq.train.trainer import train
 
+REFERENCES = ("heuristic", "ou")  # the reference policies every sweep evaluates: Table I's last rows
+
 
 @dataclass(frozen=True)
 class Stage:
@@ -105,7 +107,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
             Job("features", partial(_features, data, frozen, device)),
         ),
     ]
-    for ref in ("heuristic", "ou"):
+    for ref in REFERENCES:
         folder = out / "eval" / ref
         drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
         stages.append(Stage(partial(evaluation_done, folder), Job(f"evaluate {ref}", drive)))
