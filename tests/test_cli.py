@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from depthq.cli import VERBS, main
@@ -104,3 +106,79 @@ def test_the_cli_reference_page_is_current() -> None:
     page = Path(__file__).parents[1] / "docs" / "cli.md"
     assert page.read_text() == reference(), "docs/cli.md is stale: python -m depthq.cli_reference docs/cli.md"
     assert "## `depthq train`" in page.read_text() and "--epochs" in page.read_text()
+
+
+def _planned(printed: str) -> list[list[str]]:
+    """The commands a dry run printed, each as its words after `depthq`."""
+    import shlex
+
+    return [shlex.split(line.partition("] depthq ")[2]) for line in printed.splitlines()
+            if "] depthq " in line]
+
+
+def test_a_dry_run_prints_the_commands_its_stages_are_and_writes_nothing(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`depthq sweep --dry-run` (`lr=none`: the network's own rate, a variant equal to the preset's)
+    writes nothing, not even a lock file; each command it prints builds the config its stage runs
+    with; run, a command's stage reads as done; a folder of another setup is refused as a run would."""
+    from depthq.cli import build_parser
+    from depthq.data.recorder import CollectConfig, exploration_env
+    from depthq.evaluate.online import EvalConfig, parse_canyon_set
+    from depthq.flags import config_from_args
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.stages import _claim
+    from depthq.pipeline.sweep import parse_setting, widened
+    from depthq.train.config import TrainConfig
+
+    out = tmp_path.resolve() / "X"  # the folder the commands name, as a run resolves it
+    dry = ["sweep", "--preset", "smoke", "--set", "lr=none", "--dry-run", "--out", str(out)]
+    assert main(dry) == 0
+    assert list(tmp_path.iterdir()) == []
+    printed = capsys.readouterr().out
+    assert "smoke sweep: 4 models" in printed and "stages (13 of 13 to run)" in printed
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("lr=none"),))
+    models = {m.name: m for m in sweep.models()}
+    assert sorted(re.findall(r"^  (\S+_n\d+_s\d+\S*) ", printed, re.MULTILINE)) == sorted(models)
+    commands = _planned(printed)
+    assert [words[0] for words in commands] == ["collect", *["evaluate"] * 2, *["train", "evaluate"] * 4]
+    for words in commands:
+        args = build_parser(words[0]).parse_args(words)
+        if words[0] == "collect":
+            start = CollectConfig(env=exploration_env(family=getattr(args, "env.world.family", "paper")))
+            assert config_from_args(CollectConfig, args, base=start) == sweep.collect
+        elif words[0] == "train":
+            assert args.out == out / "models" / args.out.name and args.data == str(out / "data")
+            assert config_from_args(TrainConfig, args) == sweep.train_config(models[args.out.name], args.data)
+        else:
+            config = config_from_args(EvalConfig, args, canyons=parse_canyon_set(args.canyons))
+            assert config == sweep.eval_config() and args.no_video
+
+    assert main(["reproduce", "--preset", "smoke", "--dry-run", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.startswith("smoke: 4 models") and list(tmp_path.iterdir()) == []
+    _claim(out, sweep)  # a folder of the smoke preset's setup
+    assert main(["reproduce", "--preset", "quick", "--dry-run", "--out", str(out)]) == 2
+    assert "runs 6 there, 200 here" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["reproduce.json"]
+
+
+@pytest.mark.slow
+def test_a_stage_run_by_the_command_a_dry_run_printed_reads_as_done(
+    tmp_path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The reference heuristic's evaluation, run by its printed command in a sweep's folder: a dry run
+    then marks that stage done, and only it."""
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.stages import _claim
+
+    out = tmp_path.resolve() / "X"
+    dry = ["reproduce", "--preset", "smoke", "--dry-run", "--out", str(out)]
+    assert main(dry) == 0
+    heuristic = _planned(capsys.readouterr().out)[1]
+    assert heuristic[:2] == ["evaluate", "heuristic"]
+    _claim(out, get_preset("smoke"))  # as a run starts
+    assert main(heuristic) == 0
+    capsys.readouterr()
+    assert main(dry) == 0
+    printed = capsys.readouterr().out
+    assert "stages (12 of 13 to run)" in printed and "[done  ] depthq evaluate heuristic" in printed

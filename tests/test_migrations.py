@@ -136,3 +136,22 @@ def test_a_sweep_folder_written_before_sweeps_is_claimed_by_its_preset(tmp_path:
     assert json.loads((tmp_path / "smoke" / "reproduce.json").read_text())["sweep"]["family"] == "paper"
     with pytest.raises(ConfigError, match=r"family 'paper' there, 'hard' here"):
         _claim(tmp_path / "hard", retarget(get_preset("smoke"), family="hard"))
+
+
+def test_a_sweep_folder_that_recorded_the_default_budget_as_none_is_claimed(tmp_path: Path) -> None:
+    """Before presets named their epochs (#56), quick and paper recorded none, the trainer's 40: a
+    folder of then is resumed by its preset, and refused by a sweep of another budget."""
+    from depthq.errors import ConfigError
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.stages import _claim
+    from depthq.pipeline.sweep import widened
+
+    quick = get_preset("quick")
+    then = {"sweep": {**quick.record(), "epochs": None}}
+    for name in ("quick", "longer"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "reproduce.json").write_text(json.dumps(then))
+    _claim(tmp_path / "quick", quick)
+    assert json.loads((tmp_path / "quick" / "reproduce.json").read_text())["sweep"]["epochs"] == 40
+    with pytest.raises(ConfigError, match=r"epochs 40 there, 60 here"):
+        _claim(tmp_path / "longer", widened(quick, train=(*quick.train, ("epochs", 60))))

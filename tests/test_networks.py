@@ -4,6 +4,7 @@ trains, drives, is measured offline, drawn and exported without any other module
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 from importlib.metadata import EntryPoint
 from pathlib import Path
@@ -85,6 +86,38 @@ def test_a_packages_network_is_found_by_its_entry_point(monkeypatch: pytest.Monk
     monkeypatch.setattr(registry, "entry_points", lambda group: [broken])
     with pytest.raises(ConfigError, match=r"network 'broken' .* does not load"):
         get_network("broken")
+
+
+def _preset_models() -> dict[str, list[str]]:
+    """Each preset's models, the presets made now (their module run again, as a module of its own)."""
+    spec = importlib.util.find_spec("depthq.pipeline.presets")
+    presets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(presets)
+    return {name: [m.name for m in sweep.models()] for name, sweep in presets.PRESETS.items()}
+
+
+def test_a_registered_network_changes_no_preset(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Presets name their networks: made with a third network registered, each trains the models it
+    trains without it; a sweep that names none (an ad-hoc one, `depthq sweep` without --nets) trains
+    every registered network."""
+    from depthq.cli import main
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import Sweep
+
+    before = _preset_models()
+    monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))  # unregistered after the test
+    register_network(Clearance)
+    assert _preset_models() == before
+    assert len(before["paper"]) == 6 * 3 * 2
+    smoke = get_preset("smoke")
+    ad_hoc = Sweep("ad hoc", smoke.collect, smoke.subsets, smoke.seeds, smoke.train, smoke.canyons)
+    assert ad_hoc.nets == ("depth", "coll", "clearance")
+    assert {m.name for m in ad_hoc.models()} == {*before["smoke"], "clearance_n3_s0", "clearance_n6_s0"}
+    for given, trained in (([], True), (["--nets", "depth,coll"], False)):
+        assert main(["sweep", "--preset", "smoke", *given, "--dry-run", "--out", str(tmp_path / "x")]) == 0
+        assert ("  clearance_n3_s0 " in capsys.readouterr().out) == trained, given
 
 
 @pytest.mark.slow

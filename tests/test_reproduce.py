@@ -183,6 +183,19 @@ def test_bad_presets_and_foreign_folders_are_refused(smoke, tmp_path, capsys):
     assert "'smoke'" in err and "runs 6 there, 200 here" in err
 
 
+def test_every_preset_names_every_training_setting():
+    """A changed default changes no preset's models: each names every TrainConfig field but those its
+    sweep sets itself (model, data, runs, seed)."""
+    from depthq.flags import config_flags
+    from depthq.pipeline.presets import PRESETS
+    from depthq.pipeline.sweep import NOT_IN_GRID
+    from depthq.train.config import TrainConfig
+
+    fields = {f.path for f in config_flags(TrainConfig)} - set(NOT_IN_GRID)
+    for name, sweep in PRESETS.items():
+        assert set(dict(sweep.train)) == fields, name
+
+
 def test_paper_stages_finish_seed_0_for_every_size_first(tmp_path):
     """An interrupted `paper` run (hours long) should already hold a whole one-seed table."""
     names = [stage.name for stage in build_stages(get_preset("paper"), tmp_path)]

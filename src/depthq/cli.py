@@ -96,7 +96,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def written(args: argparse.Namespace) -> list[tuple[str, Path]]:
     """The folders a verb writes, by the flag that names them, each locked for the verb's life
-    (`depthq.lock`): its --out, or what it names in `_writes` (label: the dataset it labels)."""
+    (`depthq.lock`): its --out, or what it names in `_writes` (label: the dataset it labels); none
+    in a dry run, which writes nothing (not even a lock file)."""
+    if getattr(args, "dry_run", False):
+        return []
     names = getattr(args, "_writes", ("out",))
     return [(f"--{name}" if name == "out" else name.upper(), getattr(args, name))
             for name in names if isinstance(getattr(args, name, None), Path)]

@@ -64,6 +64,9 @@ RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in 
 FOLDER_KEYS = {new: old for old, new in RENAMED_SETTINGS.items()}
 # What a sweep folder written before a setting was part of a sweep's setup holds for it.
 _SETUP_ADDED = {"family": PAPER}
+# A setup setting a sweep folder recorded as none, "the trainer's default", before presets named it
+# (#56): that default, the one value it had (`TrainConfig.epochs`, 40 since sweeps were made).
+_SETUP_UNSET = {"epochs": 40}
 
 
 def migrate_checkpoint(record: dict[str, Any], version: int) -> dict[str, Any]:
@@ -137,5 +140,6 @@ def checkpoint_v3(record: dict[str, Any]) -> dict[str, Any]:
 def sweep_setup(record: dict[str, Any]) -> dict[str, Any]:
     """The sweep a folder's reproduce.json records (`depthq.pipeline.sweep.Sweep.record`) in today's
     shape: under "sweep", or "preset" in a folder written before sweeps; a setup setting it predates
-    (`_SETUP_ADDED`) at the one value there was."""
-    return {**_SETUP_ADDED, **record.get("sweep", record.get("preset", {}))}
+    (`_SETUP_ADDED`) or recorded as none (`_SETUP_UNSET`) at the one value there was."""
+    setup = {**_SETUP_ADDED, **record.get("sweep", record.get("preset", {}))}
+    return {**setup, **{k: v for k, v in _SETUP_UNSET.items() if setup.get(k) is None}}

@@ -1,15 +1,41 @@
 """Reproduction presets: the same sweep at three sizes (the paper's also at the nominal rate), and
-the hard canyon family's Table I (`hard`)."""
+the hard canyon family's Table I (`hard`).
+
+A preset names everything it trains: its networks (a network registered later joins an ad-hoc
+sweep, not a preset) and every training setting (`TRAINING`), so that neither a new network nor a
+changed default changes the models `depthq reproduce` trains.
+"""
 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 from depthq.data.recorder import CollectConfig
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
 from depthq.pipeline.sweep import Sweep, retarget
 from depthq.sim.world import NOMINAL_DECISION_HZ
+
+NETS = ("depth", "coll")  # the paper's two networks, in its tables' order
+# Every TrainConfig field but a sweep's own (`NOT_IN_GRID`: model, data, runs, seed), by field path;
+# tests/test_reproduce.py checks that none is left out. None is the network's own where a field's
+# default depends on its network (`lr`, `head_form`, `average`, `weights`: `TrainConfig`).
+TRAINING: dict[str, Any] = {
+    "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": None, "rho": 0.95,
+    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
+    "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
+    "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": None,
+    "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
+    "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
+    "samples.action_lag": 0, "weights": None, "snapshots": (), "average": None, "precision": "fp32",
+}
+
+
+def _training(**changes: Any) -> tuple[tuple[str, Any], ...]:
+    """`TRAINING` with `changes` (a smaller budget), as a sweep's settings."""
+    return tuple({**TRAINING, **changes}.items())
+
 
 PRESETS: dict[str, Sweep] = {
     # A few minutes end to end; the test suite runs it.
@@ -18,9 +44,10 @@ PRESETS: dict[str, Sweep] = {
         collect=CollectConfig(runs=6, val_runs=2, max_steps=60),
         subsets=(3, 6),
         seeds=(0,),
-        train=(("epochs", 2), ("train_batches", 5), ("val_batches", 2)),
+        train=_training(epochs=2, train_batches=5, val_batches=2),
         canyons="eval:0-1",
         evaluate=(("time_limit_s", 5.0),),
+        nets=NETS,
     ),
     # Same pipeline, fewer sizes and seeds: under 45 minutes on 2 CPU cores.
     "quick": Sweep(
@@ -28,9 +55,10 @@ PRESETS: dict[str, Sweep] = {
         collect=CollectConfig(runs=200, val_runs=20, max_steps=600),
         subsets=(50, 200),
         seeds=(0, 1),
-        train=(("train_batches", 100), ("val_batches", 10)),
+        train=_training(),
         canyons="eval",
         evaluate=(("time_limit_s", 45.0),),
+        nets=NETS,
     ),
     # The paper's Table I: 6 dataset sizes × 3 seeds × 2 networks, 20 canyons each.
     "paper": Sweep(
@@ -38,9 +66,10 @@ PRESETS: dict[str, Sweep] = {
         collect=CollectConfig(runs=900, val_runs=90, max_steps=600),
         subsets=PAPER_SUBSETS,
         seeds=(0, 1, 2),
-        train=(("train_batches", 100), ("val_batches", 10)),
+        train=_training(),
         canyons="eval",
         evaluate=(("time_limit_s", 45.0),),
+        nets=NETS,
     ),
 }
 # The paper's table at the camera's nominal 10 Hz, to compare with the calibrated rate (docs/calibration.md).

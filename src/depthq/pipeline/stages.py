@@ -45,6 +45,8 @@ from depthq.train.features import features_ready, load_features
 from depthq.train.folder import saved_epoch, settings_differing
 from depthq.train.trainer import train
 
+REFERENCES = ("heuristic", "ou")  # the reference policies every sweep evaluates: Table I's last rows
+
 
 @dataclass(frozen=True)
 class Stage:
@@ -105,7 +107,7 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
             Job("features", partial(_features, data, frozen, device)),
         ),
     ]
-    for ref in ("heuristic", "ou"):
+    for ref in REFERENCES:
         folder = out / "eval" / ref
         drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
         stages.append(Stage(partial(evaluation_done, folder), Job(f"evaluate {ref}", drive)))
@@ -170,10 +172,16 @@ def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str
 
 
 def _claim(out: Path, sweep: Sweep) -> None:
-    """Refuse a folder holding results of another setup; mark a new one as this sweep's. The grid
-    (networks, sizes, seeds, variants) may differ: models already there are reused. A folder holding
-    only `data` (another sweep's dataset linked in, as the head-size experiment does) is claimed: the
-    collection stage reuses it only if it holds the runs this sweep asks for."""
+    """Refuse a folder holding results of another setup (`check_claim`); mark it as this sweep's."""
+    check_claim(out, sweep)
+    write_json(out / "reproduce.json", {"sweep": sweep.record(), "provenance": provenance()})
+
+
+def check_claim(out: Path, sweep: Sweep) -> None:
+    """Refuse a folder holding results of another setup, writing nothing. The grid (networks, sizes,
+    seeds, variants) may differ: models already there are reused. A folder holding only `data`
+    (another sweep's dataset linked in, as the head-size experiment does) is claimed: the collection
+    stage reuses it only if it holds the runs this sweep asks for."""
     marker = out / "reproduce.json"
     if marker.is_file():
         held = sweep_setup(read_json(marker))
@@ -186,7 +194,6 @@ def _claim(out: Path, sweep: Sweep) -> None:
             )
     elif out.exists() and any(p.name != "data" for p in out.iterdir()):
         raise ConfigError(f"{out} exists and is not a depthq reproduce folder; use another --out")
-    write_json(marker, {"sweep": sweep.record(), "provenance": provenance()})
 
 
 def run_stages(

@@ -72,14 +72,15 @@ class Sweep:
     collect: CollectConfig
     subsets: tuple[int, ...]  # nested training-set sizes (first n runs)
     seeds: tuple[int, ...]  # training seeds per (network, size, variant)
-    # What every model's training sets (TrainConfig field paths and values); no epochs: the trainer's
-    # default budget.
+    # What every model's training sets (TrainConfig field paths and values): a preset names every
+    # field (`depthq.pipeline.presets.TRAINING`); a field left out is at its default.
     train: Settings
     canyons: str  # evaluation canyon set, as `depthq evaluate --canyons` takes it
     # What every evaluation sets besides its canyons and rate (EvalConfig field paths and values).
     evaluate: Settings = ()
     workers: int = 2
-    nets: tuple[str, ...] = field(default_factory=network_names)  # the registered networks
+    # The networks trained; by default every registered one (a preset names its own).
+    nets: tuple[str, ...] = field(default_factory=network_names)
     grid: tuple[tuple[str, tuple[Any, ...]], ...] = ()  # TrainConfig fields and the values to try
 
     def __post_init__(self) -> None:
@@ -153,14 +154,14 @@ class Sweep:
         """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent), by
         the names folders have recorded it under since sweeps were made (the dataset's manifest
         refuses any other collection setting)."""
-        train = dict(self.train)
+        budget = self.train_config(Model(self.nets[0], 1, 0), "data")  # the budget every model trains with
         return json.loads(json.dumps({
             "runs": self.collect.runs,
             "val_runs": self.collect.val_runs,
             "max_steps": self.collect.max_steps,
-            "epochs": train.get("epochs"),
-            "train_batches": train.get("train_batches"),
-            "val_batches": train.get("val_batches"),
+            "epochs": budget.epochs,
+            "train_batches": budget.train_batches,
+            "val_batches": budget.val_batches,
             "canyons": self.canyons,
             "time_limit_s": self.time_limit_s,
             "decision_hz": self.decision_hz,

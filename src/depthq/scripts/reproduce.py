@@ -7,18 +7,25 @@ from pathlib import Path
 
 from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
+from depthq.scripts.sweep import DRY_RUN_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default="quick", help="smoke (≈ 5 min), quick (≤ 45 min) or paper (≤ 3 h)")
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed when run again)")
+    p.add_argument("--dry-run", action="store_true", help=DRY_RUN_HELP)
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     add_executor_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    from depthq.report.reproduce import reproduce  # MuJoCo and torch: when this verb runs
+    from depthq.pipeline.plan import plan  # MuJoCo and torch: when this verb runs
+    from depthq.pipeline.presets import get_preset
+    from depthq.report.reproduce import reproduce
 
+    if args.dry_run:
+        print(plan(get_preset(args.preset), args.out, args.device))
+        return 0
     times = reproduce(args.preset, args.out, device=args.device, executor=executor_from(args))
     total = sum(times.values())
     print("\n".join(f"{k:>40}: {v:8.1f} s" for k, v in times.items()))
