@@ -50,8 +50,8 @@ class WorldConfig:
     # unknown; DEFAULT_DECISION_HZ is calibrated to Table II.
     decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005  # MuJoCo's time step, s; a decision's period is a whole number of them
-    # How the canyons look (docs/design.md#looks): flat, colours, textured, heldout or a folder of images;
-    # a family's own look is its default (the paper's flat, the hard family's colours).
+    # How the canyons look (docs/design.md#looks): flat, colours, textured, heldout, broad or a folder of
+    # images; a family's own look is its default (the paper's flat, the hard family's colours).
     look: str = FLAT
     # The robot camera's imaging chain (auto-exposure, white balance, vignetting, motion blur, JPEG).
     imaging: ImagingConfig = field(default_factory=ImagingConfig, metadata=OMIT_DEFAULT)
