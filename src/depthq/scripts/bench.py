@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sim.add_argument("--workers", type=int, default=1, help="processes, each stepping its own env")
     sim.add_argument("--family", default="paper", help="the canyon family driven: paper or hard")
     sim.add_argument("--look", default=None,
-                     help="looks measured one after the other, comma-separated, e.g. colours,textured: "
+                     help="looks measured in turns, comma-separated, e.g. colours,textured: "
                      "names or folders of images (docs/design.md#looks; default: the family's own)")
     col = sub.add_parser(
         "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
