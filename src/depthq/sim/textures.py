@@ -142,20 +142,21 @@ def _cells(rng: np.random.Generator, size: int, count: float, edge: float) -> np
     it tiles), each its own shade, with dark joints where two cells meet within `edge` of a cell."""
     count = int(count)
     y, x = _coords(size)
-    points = rng.uniform(0.1, 0.9, size=(count, count, 2))
-    shades = rng.uniform(0.4, 1.0, size=(count, count))
-    cy, cx = np.floor(y * count).astype(int), np.floor(x * count).astype(int)
+    points = rng.uniform(0.1, 0.9, size=(count * count, 2)).astype(np.float32)
+    shades = rng.uniform(0.4, 1.0, size=count * count)
+    y, x = y * count, x * count  # in cells
+    cy, cx = np.floor(y).astype(int), np.floor(x).astype(int)
     nearest = np.full((size, size), np.inf, np.float32)
     second = np.full((size, size), np.inf, np.float32)
     shade = np.zeros((size, size), np.float32)
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             i, j = cy + di, cx + dj
-            p = points[i % count, j % count]
-            d = np.hypot(y * count - (i + p[..., 0]), x * count - (j + p[..., 1])).astype(np.float32)
+            cell = (i % count) * count + j % count
+            d = np.sqrt((y - i - points[cell, 0]) ** 2 + (x - j - points[cell, 1]) ** 2)
             closer = d < nearest
             second = np.where(closer, nearest, np.minimum(second, d))
-            shade = np.where(closer, shades[i % count, j % count], shade)
+            shade = np.where(closer, shades[cell], shade)
             nearest = np.minimum(nearest, d)
     grain = 0.12 * periodic_noise(rng, size, 1.2)
     return np.clip(np.where(second - nearest < edge, 0.15, shade) + grain - 0.06, 0, 1).astype(np.float32)
