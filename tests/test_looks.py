@@ -152,12 +152,16 @@ def test_the_broad_look_is_deterministic_per_canyon_and_mixes_flat_and_textured_
     flat = {(k, s) for k, look in enumerate(looks) for s in SURFACES if _flat(look.textures[s])}
     for surface in ("left", "floor"):  # flat in some canyons, textured in others
         assert 0 < sum((k, surface) in flat for k in range(len(looks))) < len(looks)
+    looks += [draw_canyon_look("broad", np.random.default_rng(seed)) for seed in range(12, 150)]
     for look in looks:  # the light: never a held-out value
         assert _inside(float(look.ambient), BROAD_LIGHT.ambient)
         assert not _inside(float(look.ambient), HELDOUT_LIGHT.ambient)
         elevation = np.degrees(np.arcsin(-look.sun_dir[2]))
         assert _inside(elevation, BROAD_LIGHT.elevation_deg)
         assert not _inside(elevation, HELDOUT_LIGHT.elevation_deg)
+    # uniform over the union: training's middle interval (0.53 of its length) keeps its share, not 1/3
+    middle = np.mean([_inside(float(look.ambient), BROAD_LIGHT.ambient[1:2]) for look in looks])
+    assert 0.42 < middle < 0.65
     # real frames: the same canyon twice alike, two canyons apart, the LiDAR's geometry untouched
     first = _drive(_world("hard", "broad"), "hard/val:1000", actions=(0.0, 0.5))
     same = _drive(_world("hard", "broad"), "hard/val:1000", actions=(0.0, 0.5))

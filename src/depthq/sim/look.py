@@ -36,13 +36,16 @@ SKY_JITTER = (0.9, 1.1)  # each sky colour (zenith, horizon) × one draw of this
 
 @dataclass(frozen=True)
 class Lighting:
-    """Ranges a canyon's light is drawn from; each a union of intervals, drawn uniformly."""
+    """Ranges a canyon's light is drawn from; each a union of intervals: one interval drawn, then a
+    value uniformly within it."""
 
     elevation_deg: tuple[Range, ...]  # the sun's height above the horizon
     strength: tuple[Range, ...]  # the sun's diffuse intensity
     ambient: tuple[Range, ...]  # the ambient light (MuJoCo's headlight ambient)
     kelvin: tuple[Range, ...]  # the sun's colour temperature
     skies: tuple[tuple[tuple[float, float, float], tuple[float, float, float]], ...]  # (zenith, horizon)
+    # An interval drawn in proportion to its length (uniform over the union); else each alike.
+    by_length: bool = False
 
 
 # The training ranges: daylight through windows, indoor lamps.
@@ -71,6 +74,7 @@ BROAD_LIGHT = Lighting(
     kelvin=((2000.0, 2650.0), (3350.0, 6950.0), (9100.0, 12000.0)),
     skies=(*TRAINING_LIGHT.skies, ((0.20, 0.35, 0.75), (0.65, 0.78, 0.95)),
            ((0.95, 0.95, 0.95), (0.88, 0.88, 0.88)), ((0.32, 0.34, 0.36), (0.55, 0.56, 0.58))),
+    by_length=True,
 )
 # The broad look's camera ranges: each of textured's (`ImagingConfig`'s defaults) widened.
 BROAD_IMAGING = ImagingConfig(
@@ -128,8 +132,14 @@ def imaging(look: str, config: ImagingConfig) -> ImagingConfig:
                               if getattr(config, f.name) == getattr(default, f.name)})
 
 
-def _uniform(rng: np.random.Generator, ranges: tuple[Range, ...]) -> float:
-    lo, hi = ranges[int(rng.integers(len(ranges)))] if len(ranges) > 1 else ranges[0]
+def _uniform(rng: np.random.Generator, ranges: tuple[Range, ...], by_length: bool) -> float:
+    if len(ranges) == 1:
+        lo, hi = ranges[0]
+    elif by_length:
+        lengths = np.array([b - a for a, b in ranges])
+        lo, hi = ranges[int(rng.choice(len(ranges), p=lengths / lengths.sum()))]
+    else:
+        lo, hi = ranges[int(rng.integers(len(ranges)))]
     return float(rng.uniform(lo, hi))
 
 
@@ -152,12 +162,13 @@ def draw_canyon_look(look: str, rng: np.random.Generator) -> CanyonLook:
         source = bank(look)
         textures = {surface: draw_texture(source, rng) for surface in SURFACES}
     light = lighting(look)
-    elevation = math.radians(_uniform(rng, light.elevation_deg))
+    elevation = math.radians(_uniform(rng, light.elevation_deg, light.by_length))
     azimuth = float(rng.uniform(0, 2 * math.pi))
     sun_dir = -np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
                          math.sin(elevation)])
-    diffuse = _uniform(rng, light.strength) * kelvin_rgb(_uniform(rng, light.kelvin))
-    ambient = _uniform(rng, light.ambient)
+    diffuse = _uniform(rng, light.strength, light.by_length) * kelvin_rgb(
+        _uniform(rng, light.kelvin, light.by_length))
+    ambient = _uniform(rng, light.ambient, light.by_length)
     zenith, horizon = light.skies[int(rng.integers(len(light.skies)))]
     jitter = rng.uniform(*SKY_JITTER, size=2)
     sky = tuple(tuple(np.clip(np.array(c) * j, 0, 1).tolist())
