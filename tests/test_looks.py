@@ -241,3 +241,11 @@ def test_a_bad_look_is_exit_status_2_naming_it(tmp_path, capsys):
         assert main([*argv, "--out", str(tmp_path / "o")] if argv[0] != "bench" else argv) == 2, argv
         assert "neon" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_bench_sim_measures_several_looks_in_one_call(capsys):
+    argv = ["bench", "sim", "--family", "hard", "--look", "textured,broad", "--steps", "3", "--json"]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(result["looks"]) == {"textured", "broad"} and result["relative"]["textured"] == 1.0
+    assert all(e["steps"] == 3 and e["steps_per_s"] > 0 for e in result["looks"].values())
