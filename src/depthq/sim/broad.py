@@ -31,6 +31,7 @@ class Pattern:
     whole: tuple[str, ...] = ()
 
     def draw(self, rng: np.random.Generator) -> dict[str, float]:
+        """One setting of every parameter (a whole one: each count from lo to hi alike)."""
         return {name: float(np.floor(rng.uniform(lo, hi + 1)) if name in self.whole else rng.uniform(lo, hi))
                 for name, lo, hi in self.ranges}
 
