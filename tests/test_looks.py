@@ -12,11 +12,22 @@ from PIL import Image
 from depthq.cli import main
 from depthq.data.manifest import Dataset, upgrade_config
 from depthq.errors import ConfigError
+from depthq.sim.broad import BROAD_PHOTOS, PATTERNS, draw_broad_texture
 from depthq.sim.camera_model import ImagingConfig
 from depthq.sim.env import CanyonEnv, EnvConfig
-from depthq.sim.look import HELDOUT_LIGHT, TRAINING_LIGHT, upgrade_world
+from depthq.sim.look import (
+    BROAD_IMAGING,
+    BROAD_LIGHT,
+    HELDOUT_LIGHT,
+    SKY_JITTER,
+    SURFACES,
+    TRAINING_LIGHT,
+    draw_canyon_look,
+    imaging,
+    upgrade_world,
+)
 from depthq.sim.mjcf import CameraConfig
-from depthq.sim.textures import HELDOUT_BANK, TRAINING_BANK, draw_texture, photo
+from depthq.sim.textures import GENERATORS, HELDOUT_BANK, TRAINING_BANK, draw_texture, photo
 from depthq.sim.world import WorldConfig, world_for
 
 SMALL = CameraConfig(width=80, height=60)
@@ -87,6 +98,88 @@ def test_banks_are_disjoint_and_photos_ship_with_scikit_image():
     assert texture.shape == (64, 64, 3) and texture.dtype == np.uint8 and texture.std() > 1
 
 
+def _flat(texture: np.ndarray) -> bool:
+    return bool((texture == texture[:1, :1]).all())
+
+
+def _inside(value: float, ranges) -> bool:
+    return any(lo <= value <= hi for lo, hi in ranges)
+
+
+def test_the_broad_look_draws_nothing_held_out_and_widens_training():
+    # no held-out photograph, no held-out generator kind; the training photographs all
+    assert set(BROAD_PHOTOS) == set(TRAINING_BANK.photos) and not set(BROAD_PHOTOS) & set(HELDOUT_BANK.photos)
+    kinds = {p.kind for p in PATTERNS}
+    assert not kinds & {g.kind for g in HELDOUT_BANK.generators} and kinds <= set(GENERATORS)
+    assert {g.kind for g in TRAINING_BANK.generators} < kinds  # training's kinds and more
+    for field in ("elevation_deg", "strength", "ambient", "kelvin"):
+        broad, held = getattr(BROAD_LIGHT, field), getattr(HELDOUT_LIGHT, field)
+        assert all(b < lo or a > hi for a, b in broad for lo, hi in held), field  # disjoint intervals
+        (lo, hi), = getattr(TRAINING_LIGHT, field)
+        below, above = min(a for a, _ in broad), max(b for _, b in broad)
+        assert below < lo and above > hi, field  # wider than training on both sides
+        assert _inside(lo, broad) and _inside(hi, broad) and _inside((lo + hi) / 2, broad), field
+    j_lo, j_hi = SKY_JITTER
+    for sky in BROAD_LIGHT.skies:  # no sky colour a held-out sky can take, however jittered
+        for held in HELDOUT_LIGHT.skies:
+            for mine, theirs in zip(sky, held, strict=True):
+                assert any(j_hi * a < j_lo * b or j_lo * a > j_hi * b
+                           for a, b in zip(mine, theirs, strict=True))
+    assert set(TRAINING_LIGHT.skies) < set(BROAD_LIGHT.skies)
+    default = ImagingConfig()  # the textured look's camera ranges: every one widened or kept
+    for name in ("ae_target", "ae_rate", "vignetting", "exposure_ms", "noise_scale", "jpeg_quality"):
+        (a, b), (lo, hi) = getattr(BROAD_IMAGING, name), getattr(default, name)
+        assert a <= lo and b >= hi and b - a > hi - lo, name
+    assert BROAD_IMAGING.wb_offset > default.wb_offset and BROAD_IMAGING.wb_drift > default.wb_drift
+    assert imaging("textured", default) == default and imaging("broad", default) == BROAD_IMAGING
+    mine = ImagingConfig(vignetting=(0.1, 0.2))  # a range set by the user wins in the broad look
+    assert imaging("broad", mine) == replace(BROAD_IMAGING, vignetting=(0.1, 0.2))
+
+
+def test_broad_textures_are_flat_or_textured_and_all_differ():
+    textures = [draw_broad_texture(np.random.default_rng(seed), 64) for seed in range(40)]
+    assert all(t.shape == (64, 64, 3) and t.dtype == np.uint8 for t in textures)
+    flat = [_flat(t) for t in textures]
+    assert 3 <= sum(flat) <= 20  # a quarter flat, the rest textured
+    assert len({t.tobytes() for t in textures}) == len(textures)
+
+
+def test_the_broad_look_is_deterministic_per_canyon_and_mixes_flat_and_textured_surfaces():
+    looks = [draw_canyon_look("broad", np.random.default_rng(seed)) for seed in range(12)]
+    again = draw_canyon_look("broad", np.random.default_rng(5))
+    for surface in SURFACES:
+        np.testing.assert_array_equal(looks[5].textures[surface], again.textures[surface])
+    flat = {(k, s) for k, look in enumerate(looks) for s in SURFACES if _flat(look.textures[s])}
+    for surface in ("left", "floor"):  # flat in some canyons, textured in others
+        assert 0 < sum((k, surface) in flat for k in range(len(looks))) < len(looks)
+    looks += [draw_canyon_look("broad", np.random.default_rng(seed)) for seed in range(12, 150)]
+    for look in looks:  # the light: never a held-out value
+        assert _inside(float(look.ambient), BROAD_LIGHT.ambient)
+        assert not _inside(float(look.ambient), HELDOUT_LIGHT.ambient)
+        elevation = np.degrees(np.arcsin(-look.sun_dir[2]))
+        assert _inside(elevation, BROAD_LIGHT.elevation_deg)
+        assert not _inside(elevation, HELDOUT_LIGHT.elevation_deg)
+    # uniform over the union: training's middle interval (0.53 of its length) keeps its share, not 1/3
+    middle = np.mean([_inside(float(look.ambient), BROAD_LIGHT.ambient[1:2]) for look in looks])
+    assert 0.42 < middle < 0.65
+    # real frames: the same canyon twice alike, two canyons apart, the LiDAR's geometry untouched
+    first = _drive(_world("hard", "broad"), "hard/val:1000", actions=(0.0, 0.5))
+    same = _drive(_world("hard", "broad"), "hard/val:1000", actions=(0.0, 0.5))
+    other = _drive(_world("hard", "broad"), "hard/val:1001", actions=(0.0, 0.5))
+    textured = _drive(_world("hard", "textured"), "hard/val:1000", actions=(0.0, 0.5))
+    assert first[:2] == same[:2]
+    np.testing.assert_array_equal(first[3], textured[3])
+    for image in (other[2], textured[2]):
+        assert np.abs(first[2].astype(int) - image.astype(int)).mean() > 5
+    env = CanyonEnv(EnvConfig(world=_world("hard", "broad")))
+    try:
+        env.reset(seed=1, options={"canyon": "hard/val:1000"})
+        camera = env.world.robot_camera
+        assert camera is not None and 4 <= camera.exposure_s * 1000 <= 50  # the broad camera's ranges
+    finally:
+        env.close()
+
+
 def test_a_folder_of_images_is_a_look(tmp_path):
     rng = np.random.default_rng(7)
     for k in range(3):  # a user's "photographs": coarse random blocks, nothing like the built-in banks
@@ -148,3 +241,11 @@ def test_a_bad_look_is_exit_status_2_naming_it(tmp_path, capsys):
         assert main([*argv, "--out", str(tmp_path / "o")] if argv[0] != "bench" else argv) == 2, argv
         assert "neon" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_bench_sim_measures_several_looks_in_one_call(capsys):
+    argv = ["bench", "sim", "--family", "hard", "--look", "textured,broad", "--steps", "3", "--json"]
+    assert main(argv) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(result["looks"]) == {"textured", "broad"} and result["relative"]["textured"] == 1.0
+    assert all(e["steps"] == 3 and e["steps_per_s"] > 0 for e in result["looks"].values())

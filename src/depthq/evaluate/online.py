@@ -108,8 +108,8 @@ class EvalConfig:
     discount: float = 0.9
     # A lookahead Depth-Q-Net also scores sequences that switch action once.
     switch: bool = False
-    # How the canyons look: flat, colours, textured, heldout or a folder of images (docs/design.md#looks);
-    # none: the family's own. Any policy drives in any look.
+    # How the canyons look: flat, colours, textured, heldout, broad or a folder of images
+    # (docs/design.md#looks); none: the family's own. Any policy drives in any look.
     look: str | None = field(default=None, metadata=OMIT_DEFAULT)
 
     def __post_init__(self) -> None:

@@ -419,8 +419,8 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--time-limit", type=float, default=None,
                     help="seconds per evaluation run (default: the canyons' family's)")
     go.add_argument("--look", default=None,
-                    help="the look every policy drives in: flat, colours, textured, heldout or a folder of "
-                         "images (default: the canyons' family's own)")
+                    help="the look every policy drives in: flat, colours, textured, heldout, broad or a "
+                         "folder of images (default: the canyons' family's own)")
     go.add_argument("--labeller-set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a LabellerConfig setting (e.g. steps=300, pool_runs=100); repeatable")
     go.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",

@@ -71,7 +71,7 @@ from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.report.paired import Summaries, by_seed
 from depthq.report.tables import markdown
 from depthq.sim.env import CanyonEnv, EnvConfig
-from depthq.sim.look import COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
+from depthq.sim.look import BROAD, COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
 from depthq.train.folder import METRICS, read_metrics
@@ -79,6 +79,8 @@ from depthq.train.offline_metric import offline_metric
 
 PROG = "python -m depthq.experiments.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
+# The figure's broad-look row: the same drive in four val canyons, the first the figure's.
+BROAD_CANYONS = tuple(f"hard/val:{k}" for k in range(1000, 1004))
 POSE_STEPS = 8  # straight ahead for this many decisions, then one turning step (blur in the textured looks)
 TRAIN_LOOKS = (COLOURS, TEXTURED)
 DRIVE_LOOKS = (COLOURS, TEXTURED, HELDOUT)
@@ -187,17 +189,19 @@ def frames(canyon: str = CANYON, looks: tuple[str, ...] = LOOKS) -> dict[str, np
     return out
 
 
-def figure(path: Path, canyon: str = CANYON) -> None:
-    """A 2 × 2 grid of the looks' frames, each labelled, as a PNG."""
-    tiles = []
-    for look, image in frames(canyon).items():
-        tile = Image.fromarray(image)
-        ImageDraw.Draw(tile).text((8, 6), look, fill=(255, 255, 255))
-        tiles.append(np.asarray(tile))
-    half = (len(tiles) + 1) // 2
-    grid = np.concatenate([np.concatenate(tiles[:half], 1), np.concatenate(tiles[half:], 1)], 0)
+def figure(path: Path, canyon: str = CANYON, broad: tuple[str, ...] = BROAD_CANYONS) -> None:
+    """The looks' frames at the same pose in a row, then the broad look's in the canyons `broad` (the
+    first is `canyon`), each labelled, as a PNG."""
+    def tile(image: np.ndarray, label: str) -> np.ndarray:
+        picture = Image.fromarray(image)
+        ImageDraw.Draw(picture).text((8, 6), label, fill=(255, 255, 255))
+        return np.asarray(picture)
+
+    others = tuple(look for look in LOOKS if look != BROAD)
+    looks = [tile(image, look) for look, image in frames(canyon, others).items()]
+    wide = [tile(frames(c, (BROAD,))[BROAD], f"{BROAD}, {c}") for c in broad]
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(grid).save(path)
+    Image.fromarray(np.concatenate([np.concatenate(looks, 1), np.concatenate(wide, 1)], 0)).save(path)
 
 
 def checkpoints(out: Path, look: str, runs: int, seed: int, method: str) -> dict[str, Path]:

@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sim.add_argument("--workers", type=int, default=1, help="processes, each stepping its own env")
     sim.add_argument("--family", default="paper", help="the canyon family driven: paper or hard")
     sim.add_argument("--look", default=None,
-                     help="looks measured one after the other, comma-separated, e.g. colours,textured: "
+                     help="looks measured in turns, comma-separated, e.g. colours,textured: "
                      "names or folders of images (docs/design.md#looks; default: the family's own)")
     col = sub.add_parser(
         "collect", help="collection steps/s with storage, 1 and W workers (≥ 100 per worker)"
@@ -78,8 +78,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     dev.add_argument("--steps", type=int, default=200, help="env steps per worker, one worker per core")
     for parser in (col, ev, step):
         parser.add_argument("--look", default=None,
-                            help="the look driven in: flat, colours, textured, heldout or a folder of images "
-                            "(docs/design.md#looks; default: the canyons' family's own)")
+                            help="the look driven in: flat, colours, textured, heldout, broad or a folder of "
+                            "images (docs/design.md#looks; default: the canyons' family's own)")
     for parser in (sim, col, feat, tr, pol, ev, step, dev):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
     for parser in (feat, tr, pol, ev, step, dev):

@@ -29,8 +29,9 @@ _MAX_BLUR_PX = 64  # a longer blur is cut to this (a turn far faster than the ro
 
 @dataclass(frozen=True)
 class ImagingConfig:
-    """Ranges a run's camera is drawn from (each uniform between its two values). The real values each
-    stands for are in docs/design.md#camera-model."""
+    """Ranges a run's camera is drawn from (each uniform between its two values); the broad look widens
+    every one left at its default (`depthq.sim.look.BROAD_IMAGING`). The real values each stands for
+    are in docs/design.md#camera-model."""
 
     # On or off; none: on in the textured looks, off in flat and colours (today's frames).
     enabled: bool | None = None

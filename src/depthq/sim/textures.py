@@ -64,10 +64,11 @@ def _coords(size: int) -> tuple[np.ndarray, np.ndarray]:
     return y, x
 
 
-def periodic_noise(rng: np.random.Generator, size: int, beta: float) -> np.ndarray:
-    """Noise with a 1/f^beta power spectrum, periodic by construction (FFT-filtered white noise)."""
+def periodic_noise(rng: np.random.Generator, size: int, beta: float, stretch: float = 1.0) -> np.ndarray:
+    """Noise with a 1/f^beta power spectrum, periodic by construction (FFT-filtered white noise);
+    `stretch` > 1 draws it out along the rows (grain), < 1 along the columns."""
     f = np.fft.fftfreq(size)
-    radius = np.sqrt(f[:, None] ** 2 + f[None, :] ** 2)
+    radius = np.sqrt((f[:, None] / stretch) ** 2 + (f[None, :] * stretch) ** 2)
     radius[0, 0] = 1.0
     spectrum = np.fft.fft2(rng.standard_normal((size, size))) / radius ** (beta / 2)
     spectrum[0, 0] = 0.0
@@ -136,9 +137,60 @@ def _dots(rng: np.random.Generator, size: int, count: float, radius: float) -> n
     return np.where(dot, 0.1, ground).astype(np.float32)
 
 
+def _cells(rng: np.random.Generator, size: int, count: float, edge: float) -> np.ndarray:
+    """Irregular stones: the Voronoi cells of a jittered `count` × `count` grid of points (wrapped, so
+    it tiles), each its own shade, with dark joints where two cells meet within `edge` of a cell."""
+    count = int(count)
+    y, x = _coords(size)
+    points = rng.uniform(0.1, 0.9, size=(count * count, 2)).astype(np.float32)
+    shades = rng.uniform(0.4, 1.0, size=count * count)
+    y, x = y * count, x * count  # in cells
+    cy, cx = np.floor(y).astype(int), np.floor(x).astype(int)
+    nearest = np.full((size, size), np.inf, np.float32)
+    second = np.full((size, size), np.inf, np.float32)
+    shade = np.zeros((size, size), np.float32)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            i, j = cy + di, cx + dj
+            cell = (i % count) * count + j % count
+            d = np.sqrt((y - i - points[cell, 0]) ** 2 + (x - j - points[cell, 1]) ** 2)
+            closer = d < nearest
+            second = np.where(closer, nearest, np.minimum(second, d))
+            shade = np.where(closer, shades[cell], shade)
+            nearest = np.minimum(nearest, d)
+    grain = 0.12 * periodic_noise(rng, size, 1.2)
+    return np.clip(np.where(second - nearest < edge, 0.15, shade) + grain - 0.06, 0, 1).astype(np.float32)
+
+
+def _waves(rng: np.random.Generator, size: int, count: float, frequency: float, sharpness: float
+           ) -> np.ndarray:
+    """`count` plane waves of up to `frequency` periods per tile, each in its own direction (whole
+    periods, so it tiles), summed and shaped by `sharpness` (< 1 soft, > 1 crisp bands)."""
+    y, x = _coords(size)
+    k = int(frequency)
+    total = np.zeros((size, size), np.float32)
+    for _ in range(int(count)):
+        a, b = 0, 0
+        while a == 0 and b == 0:
+            a, b = (int(v) for v in rng.integers(-k, k + 1, size=2))
+        total += np.sin(2 * np.pi * (a * x + b * y) + rng.uniform(0, 2 * np.pi))
+    v = total / int(count)
+    return (0.5 + 0.5 * np.sign(v) * np.abs(v) ** (1 / sharpness)).astype(np.float32)
+
+
+def _plaid(rng: np.random.Generator, size: int, bands: float, mix: float) -> np.ndarray:
+    """Tartan: `bands` bands of random widths and shades across the tile and as many along it,
+    crossed (`mix` of the one, the rest of the other)."""
+    def profile() -> np.ndarray:
+        edges = np.sort(rng.integers(0, size, size=int(bands)))
+        shades = rng.uniform(0.0, 1.0, size=int(bands))
+        return shades[np.searchsorted(edges, np.arange(size), side="right") % int(bands)]
+    return (mix * profile()[None, :] + (1 - mix) * profile()[:, None]).astype(np.float32)
+
+
 GENERATORS = {
     "noise": periodic_noise, "bricks": _bricks, "stripes": _stripes, "wood": _wood,
-    "marble": _marble, "tiles": _tiles, "dots": _dots,
+    "marble": _marble, "tiles": _tiles, "dots": _dots, "cells": _cells, "waves": _waves, "plaid": _plaid,
 }
 
 

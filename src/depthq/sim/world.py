@@ -15,7 +15,7 @@ from depthq.errors import ConfigError
 from depthq.sim.camera import OffscreenCamera
 from depthq.sim.camera_model import ImagingConfig, RobotCamera, noise_table
 from depthq.sim.canyon import FAMILIES, PAPER, Canyon, CanyonConfig
-from depthq.sim.look import FLAT, SURFACES, CanyonLook, check_look, draw_canyon_look, is_textured
+from depthq.sim.look import FLAT, SURFACES, CanyonLook, check_look, draw_canyon_look, imaging, is_textured
 from depthq.sim.mjcf import (
     ROBOT_GROUP,
     VISUAL_GROUP,
@@ -50,8 +50,8 @@ class WorldConfig:
     # unknown; DEFAULT_DECISION_HZ is calibrated to Table II.
     decision_hz: float = DEFAULT_DECISION_HZ
     physics_dt: float = 0.005  # MuJoCo's time step, s; a decision's period is a whole number of them
-    # How the canyons look (docs/design.md#looks): flat, colours, textured, heldout or a folder of images;
-    # a family's own look is its default (the paper's flat, the hard family's colours).
+    # How the canyons look (docs/design.md#looks): flat, colours, textured, heldout, broad or a folder of
+    # images; a family's own look is its default (the paper's flat, the hard family's colours).
     look: str = FLAT
     # The robot camera's imaging chain (auto-exposure, white balance, vignetting, motion blur, JPEG).
     imaging: ImagingConfig = field(default_factory=ImagingConfig, metadata=OMIT_DEFAULT)
@@ -316,12 +316,12 @@ class CanyonWorld:
 
     def start_run(self, rng: np.random.Generator) -> None:
         """Draw a run's camera (`depthq.sim.camera_model`) when the look has one; nothing drawn otherwise."""
-        cam, imaging = self.config.camera, self.config.imaging
-        if not imaging.on(self.config.textured):
+        cam, ranges = self.config.camera, imaging(self.config.look, self.config.imaging)
+        if not ranges.on(self.config.textured):
             self.robot_camera = None
             return
         own = np.random.default_rng(rng.integers(2**63))
-        self.robot_camera = RobotCamera(imaging, cam.width, cam.height, cam.hfov_deg, cam.noise_std, own)
+        self.robot_camera = RobotCamera(ranges, cam.width, cam.height, cam.hfov_deg, cam.noise_std, own)
 
     def image(self, rng: np.random.Generator) -> np.ndarray:
         """The camera frame: the render with Gaussian pixel noise (σ = camera.noise_std of full scale),
