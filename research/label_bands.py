@@ -5,7 +5,7 @@ labels, driven in the same canyons. A diagnostic: its labels use the LiDAR, no l
 
     python -m research.label_bands run OUT --band near|far [--split 1.0] [--seeds 0]
 
-OUT is a `python -m depthq.experiments.camera_labels run` folder (its floor labels, setup and sweep);
+OUT is a `python -m research.camera_labels run` folder (its floor labels, setup and sweep);
 this writes OUT/bands/<band>_<split>/data (OUT/floor/data hard-linked, its labels replaced), models/
 and eval/, as the camera-label experiment lays them out, and prints that experiment's rows for them.
 
@@ -29,7 +29,11 @@ from depthq.configio import read_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
-from depthq.experiments.camera_labels import (
+from depthq.pipeline.layout import model_name
+from depthq.pipeline.sweep import parse_ints
+from depthq.report.cells import mean_interval
+from depthq.train.trainer import train
+from research.camera_labels import (
     SUMMARY,
     camera_config,
     evaluate_once,
@@ -37,10 +41,6 @@ from depthq.experiments.camera_labels import (
     parse_settings,
     read_setup,
 )
-from depthq.pipeline.layout import model_name
-from depthq.pipeline.sweep import parse_ints
-from depthq.report.cells import mean_interval
-from depthq.train.trainer import train
 
 PROG = "python -m research.label_bands"
 BANDS = ("near", "far")

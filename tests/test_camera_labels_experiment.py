@@ -1,4 +1,4 @@
-"""The camera-labels experiment (`depthq.experiments.camera_labels`, issue #32 item 3) at toy size, on
+"""The camera-labels experiment (`research.camera_labels`, issue #32 item 3) at toy size, on
 the suite's smoke sweep (read, never changed): a floor labeller, the labelled hard-linked copy and its
 stats, a camera-label Depth-Q-Net, the sweep's own Depth-Q-Net and Coll-Q-Net, all driven in one
 `val` canyon; the table; a rerun that does nothing."""
@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 
 from depthq.data.manifest import Dataset
-from depthq.experiments import camera_labels
 from depthq.nets.checkpoint import read_config
-from research import label_bands
+from research import camera_labels, label_bands
 
 TOY = [
     "--method", "floor", "--runs", "6", "--seeds", "0", "--canyons", "val:1000", "--time-limit", "5",

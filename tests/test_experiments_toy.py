@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 
 import research
-from depthq import experiments
 from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data.manifest import Dataset
@@ -48,17 +47,16 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_python(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """The package ships the live experiments (how a published table is made now); the finished
-    investigations are research/'s, outside the wheel; each runs as `python -m <its module>`."""
+    """The experiments, live (how a published table is made now) and finished, are research/'s, outside
+    the wheel (tests/test_layers.py: no `depthq` module imports one); each runs as `python -m NAME`."""
     assert not sorted(DOCS.rglob("*.py"))
-    live = [f"depthq.experiments.{m.name}" for m in pkgutil.iter_modules(experiments.__path__)]
-    finished = [f"research.{m.name}" for m in pkgutil.iter_modules(research.__path__)]
-    assert set(live) == {"depthq.experiments.camera_labels", "depthq.experiments.looks",
-                         "depthq.experiments.ros_fidelity", "depthq.experiments.sizing",
-                         "depthq.experiments.weights_check"}
-    assert {f"research.{name}" for name in ("action_fidelity", "hard_canyons", "investigation", "lookahead",
-                                            "oracle_gap", "precision", "val_choices")} <= set(finished)
-    for name in live + finished:
+    names = [f"research.{m.name}" for m in pkgutil.iter_modules(research.__path__)]
+    assert {f"research.{name}" for name in (
+        "camera_labels", "looks", "ros_fidelity", "sizing", "weights_check",  # live
+        "action_fidelity", "hard_canyons", "investigation", "lookahead", "oracle_gap", "precision",
+        "val_choices",
+    )} <= set(names)
+    for name in names:
         module = importlib.import_module(name)
         if not hasattr(module, "main"):  # a shared helper (truth)
             continue

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from depthq.data.manifest import Dataset
-from depthq.experiments import looks
 from depthq.lock import exclusive
+from research import looks
 
 TOY = [
     "--preset", "smoke", "--runs", "3", "--seeds", "0", "--train-looks", "textured",

@@ -39,7 +39,7 @@ from depthq.deploy.robot import (
 from depthq.deploy.ros1 import DEBIAN_PACKAGES
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.errors import ConfigError, DataError
-from depthq.experiments.ros_fidelity import replica_run
+from research.ros_fidelity import replica_run
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -584,8 +584,8 @@ def test_one_drive_node_drives_two_simulator_runs_in_a_row(toy_nets: dict[str, P
 def test_the_paired_table_pools_measurements(tmp_path: Path) -> None:
     """ros_fidelity --paired: a row per finished measurement and one pooled, the paired interval."""
     from depthq.configio import write_json
-    from depthq.experiments.ros_fidelity import main as fidelity
-    from depthq.experiments.ros_fidelity import paired
+    from research.ros_fidelity import main as fidelity
+    from research.ros_fidelity import paired
 
     def row(ros: float, ev: float) -> dict:
         return {"ros": ros, "evaluate": ev, "ros_end": "bump", "evaluate_end": "end" if ev > 20 else "bump"}

@@ -1,13 +1,13 @@
-"""The head-size experiment (`depthq.experiments.sizing`): its four sweeps as `depthq sweep` builds
+"""The head-size experiment (`research.sizing`): its four sweeps as `depthq sweep` builds
 them, and the choice it draws from the driven models, paired by family, size and seed."""
 
 from __future__ import annotations
 
 import itertools
 
-from depthq.experiments import sizing
-from depthq.experiments.sizing import Point
 from depthq.lock import exclusive
+from research import sizing
+from research.sizing import Point
 
 
 def test_the_sweeps_train_every_width_and_depth_q_net_every_epoch_budget() -> None:

@@ -1,4 +1,4 @@
-"""The weights check (`depthq.experiments.weights_check`): per weights choice, dead bins, the spread of
+"""The weights check (`research.weights_check`): per weights choice, dead bins, the spread of
 the candidates' scores and the actions chosen on the checkpoint's validation frames, and each choice
 driven; bad input named before any work."""
 
@@ -12,7 +12,6 @@ import pytest
 from depthq.configio import read_json
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
-from depthq.experiments import weights_check
 from depthq.nets.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_fails,
@@ -23,6 +22,7 @@ from depthq.nets.checkpoint import (
     write_sidecar,
 )
 from depthq.policies.qnet import QNetPolicy
+from research import weights_check
 
 
 def test_each_weights_choice_is_looked_at_and_driven(toy_nets: dict[str, Path], tmp_path: Path,

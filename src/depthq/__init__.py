@@ -26,8 +26,6 @@ source against it, folders and files):
     ← pipeline                              a sweep's grid, presets, run folder and resumable stages
     ← report | bench                        a sweep folder's tables, figures, findings and HTML report |
                                             `depthq bench` figures
-    ← experiments                           the live experiments behind the docs' tables, run as modules
-                                            (no verb imports them; finished ones are research/'s)
     ← scripts ← cli, cli_reference          one module per verb, the `depthq` command, its reference
                                             page (docs/cli.md)
 

@@ -2,7 +2,7 @@
 started against it (`depthq ros sim`, `depthq ros drive`, `rosbag record`, …), each in a process group
 of its own and each logging to a file, all stopped when the block ends, whatever happened (SIGINT,
 then SIGKILL after a grace period; roscore last, and no master left answering on its port). The
-closed-loop test and `depthq.experiments.ros_fidelity` drive through it."""
+closed-loop test and `research.ros_fidelity` drive through it."""
 
 from __future__ import annotations
 

@@ -19,7 +19,6 @@ from statistics import NormalDist
 
 import numpy as np
 from PIL import Image
-from scipy import ndimage
 
 from depthq.errors import ConfigError
 
@@ -110,9 +109,11 @@ class RobotCamera:
         """A render (uint8) as the sensor records it, before noise: float32 in grey levels (a buffer
         the next call reuses)."""
         x, w = self._x, self._width
+        from scipy.ndimage import uniform_filter1d  # here: naming a look (`depthq --help`) loads no scipy
+
         n = min(round(self.blur_px(yaw_rate)), _MAX_BLUR_PX)
         if n >= 2:  # a box blur along the rows: the scene sweeps sideways across the sensor while turning
-            ndimage.uniform_filter1d(frame, n, axis=1, output=x, mode="nearest")
+            uniform_filter1d(frame, n, axis=1, output=x, mode="nearest")
         else:
             np.copyto(x, frame)
         x *= self.vignette

@@ -1,10 +1,10 @@
 """Which weights a checkpoint acts with, looked at on its own validation frames
 (docs/design.md#weights-check).
 
-    python -m depthq.experiments.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
-    python -m depthq.experiments.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT
-    python -m depthq.experiments.weights_check CHECKPOINT --parts
-    python -m depthq.experiments.weights_check --margins CHECKPOINT [CHECKPOINT ...]
+    python -m research.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
+    python -m research.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT
+    python -m research.weights_check CHECKPOINT --parts
+    python -m research.weights_check --margins CHECKPOINT [CHECKPOINT ...]
 
 For each weights choice (default: final, best and, where the training kept it, average): the bins it
 predicts as 0 for every candidate action on every frame (dead: a 0 is no reading, so its policy never
@@ -52,7 +52,7 @@ from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig
 from depthq.train.features import load_features
 
-PROG = "python -m depthq.experiments.weights_check"
+PROG = "python -m research.weights_check"
 DEAD = 1e-6  # m: a bin predicted at or below this is no reading
 
 

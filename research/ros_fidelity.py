@@ -1,6 +1,6 @@
 """Does a policy drive through ROS as it drives in `depthq evaluate`? A deployment fidelity check.
 
-    python -m depthq.experiments.ros_fidelity CHECKPOINT --canyons hard/eval:0-4 --out runs/ros-fidelity
+    python -m research.ros_fidelity CHECKPOINT --canyons hard/eval:0-4 --out runs/ros-fidelity
 
 For each canyon: roscore, `depthq ros sim --canyon C` (the camera at --camera-hz, real time) and
 `depthq ros drive --policy CHECKPOINT` as separate processes (`depthq.deploy.ros_graph`), one run; then
@@ -9,14 +9,14 @@ canyon: the distance through ROS and in the evaluation, the end reasons, the nod
 median latency (frame stamp → command published, on the simulated clock). It drives `eval` canyons
 by design: it measures the deployment, not a choice made on them (docs/robot.md#ros-fidelity).
 
-    python -m depthq.experiments.ros_fidelity CHECKPOINT --replica --seeds 0,1 --out runs/ros-replica
+    python -m research.ros_fidelity CHECKPOINT --replica --seeds 0,1 --out runs/ros-replica
 
 measures where a difference comes from, without ROS and its timing: the same node core
 (`RobotDriver`) and simulated robot (`CanyonRobot`) in lock-step on the simulated clock, the command
 applied `latency` seconds after its decision, the frames given as JPEG (as through ROS) or raw (as
 in the evaluation), with several sensor-noise seeds: one row per (latency, frames) setting.
 
-    python -m depthq.experiments.ros_fidelity --paired runs/ros-fidelity3 runs/ros-fidelity-s3-8
+    python -m research.ros_fidelity --paired runs/ros-fidelity3 runs/ros-fidelity-s3-8
 
 reads finished measurements and prints docs/robot.md's table: per folder and all pooled, the mean
 distances, their ratio, the paired difference (ROS − evaluate per canyon and seed) with its 95 %
@@ -121,7 +121,7 @@ def paired(folders: list[Path]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m depthq.experiments.ros_fidelity",
+    parser = argparse.ArgumentParser(prog="python -m research.ros_fidelity",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("checkpoint", type=Path, nargs="?")
     parser.add_argument("--canyons", default="hard/eval:0-4", help="a canyon set, as evaluate's")

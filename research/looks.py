@@ -1,10 +1,10 @@
 """Looks (docs/design.md#looks): the same pose in every look, and which value signal transfers across
 looks (issue #45 item 3).
 
-    python -m depthq.experiments.looks figure [DOCS]          # DOCS/looks.png (default docs/)
-    python -m depthq.experiments.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
-    python -m depthq.experiments.looks table OUT [--runs 500] [--seeds 0-2]
-    python -m depthq.experiments.looks report OUT [--runs 500] [--seeds 0-2]   # OUT/report.md, .html
+    python -m research.looks figure [DOCS]          # DOCS/looks.png (default docs/)
+    python -m research.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
+    python -m research.looks table OUT [--runs 500] [--seeds 0-2]
+    python -m research.looks report OUT [--runs 500] [--seeds 0-2]   # OUT/report.md, .html
 
 `run` (resumed: every step is skipped when its output is complete), per training look L (default
 colours, textured), hard canyons:
@@ -12,7 +12,7 @@ colours, textured), hard canyons:
     OUT/<L>/sweep/             `depthq sweep --preset hard --look L --runs N --sizes N --seeds S
                                --canyons <choose>`: the data in look L, the Depth-Q-Nets (LiDAR labels)
                                and Coll-Q-Nets, evaluated in look L in the choice canyons
-    OUT/<L>/camera/            `python -m depthq.experiments.camera_labels run` on it (--method
+    OUT/<L>/camera/            `python -m research.camera_labels run` on it (--method
                                monodepth): the labeller, its labels' error, the camera-label Depth-Q-Nets
     OUT/<L>/eval_<D>/<net>_s<S>/  every net (depth, camera, coll) driven in look D (default colours,
                                textured, heldout) in `--canyons`
@@ -55,7 +55,6 @@ from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.experiments import camera_labels
 from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
 from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
@@ -76,8 +75,9 @@ from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
 from depthq.train.folder import METRICS, read_metrics
 from depthq.train.offline_metric import offline_metric
+from research import camera_labels
 
-PROG = "python -m depthq.experiments.looks"
+PROG = "python -m research.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
 # The figure's broad-look row: the same drive in four val canyons, the first the figure's.
 BROAD_CANYONS = tuple(f"hard/val:{k}" for k in range(1000, 1004))
@@ -149,7 +149,7 @@ def _restoring(pins: dict[str, dict[str, Any]], built: dict[str, dict[str, Any]]
         if clash := [name for name, pin in pins.items() if pin[key] != value]:
             raise ConfigError(f"the defaults moved away from the looks experiment's pinned {key} differently "
                               f"for {', '.join(clash)}: pin that setting per network in "
-                              f"depthq.experiments.looks")
+                              f"research.looks")
     return tuple(needed.items())
 
 

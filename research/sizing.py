@@ -7,8 +7,8 @@ its family. Every variant is compared with the reference (4096 wide, 40 epochs) 
 size and seed; the cheapest variant that drives as far in every family (there, its mean paired
 difference no worse than minus the reference's spread between seeds) is the one to make the default.
 
-    python -m depthq.experiments.sizing run OUT       # the four sweeps, resumed when rerun
-    python -m depthq.experiments.sizing report OUT    # OUT/report.md, OUT/sizing.json, OUT/sizing.png
+    python -m research.sizing run OUT       # the four sweeps, resumed when rerun
+    python -m research.sizing report OUT    # OUT/report.md, OUT/sizing.json, OUT/sizing.png
 
 OUT/<family>-<net>/ is a `depthq sweep` folder (the Coll-Q-Net sweeps read the Depth-Q-Net sweeps'
 data through a symlink). The reference width is pinned, so the folders keep their names when the
@@ -41,7 +41,7 @@ from depthq.report.cells import mean_interval
 from depthq.report.tables import interval, markdown
 from depthq.train.folder import read_metrics
 
-PROG = "python -m depthq.experiments.sizing"
+PROG = "python -m research.sizing"
 CANYONS = {"hard": "hard/val:1000-1019", "paper": "val:1000-1019"}  # the choice canyons of each family
 NETS = ("depth", "coll")
 WIDTHS = (512, 1024, 2048, 4096)

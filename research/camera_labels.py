@@ -4,10 +4,10 @@ A Depth-Q-Net trained on bins a labeller estimated from the camera (docs/design.
 against the sweep's own Depth-Q-Net (LiDAR labels) and Coll-Q-Net (the bump), all driven in the same
 canyons, per canyon family and labeller.
 
-    python -m depthq.experiments.camera_labels run SWEEP OUT --method floor [--runs 500] [--seeds 0,1]
-    python -m depthq.experiments.camera_labels run SWEEP OUT --method monodepth [--runs 500] [--seeds 0,1]
-    python -m depthq.experiments.camera_labels run SWEEP OUT --method perception --labeller-data OTHER/data
-    python -m depthq.experiments.camera_labels table OUT [OUT2 ...] [--runs 500] [--seeds 0,1]
+    python -m research.camera_labels run SWEEP OUT --method floor [--runs 500] [--seeds 0,1]
+    python -m research.camera_labels run SWEEP OUT --method monodepth [--runs 500] [--seeds 0,1]
+    python -m research.camera_labels run SWEEP OUT --method perception --labeller-data OTHER/data
+    python -m research.camera_labels table OUT [OUT2 ...] [--runs 500] [--seeds 0,1]
 
 SWEEP is a `depthq sweep` / `depthq reproduce` folder (SWEEP/data, SWEEP/models/<net>_n<runs>_s<seed>);
 OUT holds one sweep's experiment, every labeller's beside the others:
@@ -72,7 +72,7 @@ from depthq.train.config import TrainConfig
 from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
 
-PROG = "python -m depthq.experiments.camera_labels"
+PROG = "python -m research.camera_labels"
 VAL = "val:1000-1019"  # a family's val canyons, far from its datasets' val runs (val:0..89)
 # Every evaluation drives each checkpoint's own default weights (a depth-first Depth-Q-Net's final ones,
 # Coll-Q-Net's best: docs/design.md), so that no network is weakened for the comparison.
