@@ -14,6 +14,8 @@ manifest.json:
     seed                        the collection seed
     config                      the collection config that made the runs (a JSON object); a DAgger
                                 round's adds `rounds` (docs/formats.md#manifest)
+    look_images                 only when the look is a folder of images: each image's SHA-256 by file
+                                name, so a collection does not resume with other images
     runs                        one row per completed run, sorted by split and index:
         split, index            "train" | "val", position in that split (the file name says both)
         file                    path relative to DIR, e.g. "runs/train_000123.h5"
@@ -99,10 +101,12 @@ def run_path(root: Path, split: str, index: int) -> Path:
 class Dataset:
     """A dataset folder. `create` starts or resumes one (the collector), `open` reads one (everyone else)."""
 
-    def __init__(self, root: Path, config: dict[str, Any], seed: int, runs: list[RunEntry]) -> None:
+    def __init__(self, root: Path, config: dict[str, Any], seed: int, runs: list[RunEntry],
+                 look_images: dict[str, str] | None = None) -> None:
         self.root = Path(root)
         self.config = config
         self.seed = seed
+        self.look_images = look_images  # a folder look's images: SHA-256 by file name
         self._runs = {(r.split, r.index): r for r in runs}
 
     @classmethod
@@ -118,16 +122,23 @@ class Dataset:
             if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
                 raise ValueError(f"format {data.get('format')!r} version {data.get('format_version')!r}")
             runs = [from_dict(RunEntry, row) for row in data["runs"]]
-            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs)
+            images = data.get("look_images")
+            if images is not None and not (isinstance(images, dict) and all(
+                    isinstance(v, str) for v in images.values())):
+                raise ValueError(f"look_images {images!r}")
+            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs, images)
         except (AttributeError, KeyError, TypeError, ValueError) as err:
             raise DataError(f"{path}: not a valid {FORMAT} manifest ({err})") from err
 
     @classmethod
-    def create(cls, root: Path, config: dict[str, Any], seed: int, overwrite: bool = False) -> Dataset:
+    def create(cls, root: Path, config: dict[str, Any], seed: int, overwrite: bool = False,
+               look_images: dict[str, str] | None = None) -> Dataset:
         """Start a dataset in `root`, or resume the one there if it was made with the same config and seed.
 
-        A dataset made with another config or seed is a ConfigError naming the differing keys.
-        `overwrite` starts afresh whatever is there: it deletes the manifest and all runs first.
+        A dataset made with another config or seed is a ConfigError naming the differing keys, and so
+        is one whose folder look's images (`look_images`: SHA-256 by name) changed since, naming them;
+        one written before the manifest recorded them takes today's. `overwrite` starts afresh whatever
+        is there: it deletes the manifest and all runs first.
         """
         root = Path(root)
         config = json.loads(json.dumps(config))  # the form it takes in the manifest (tuples become lists)
@@ -144,11 +155,12 @@ class Dataset:
                     f"{root} holds a dataset made with a different configuration (differs in: "
                     f"{', '.join(differing)}); use another folder, or overwrite it"
                 )
+            old._check_look_images(look_images)
             old._remove_temporaries()
             return old
         elif root.exists() and any(p.name != RUNS for p in root.iterdir()):
             raise ConfigError(f"{root}: exists, is not empty and is not a dataset folder (no {MANIFEST})")
-        dataset = cls(root, config, seed, [])
+        dataset = cls(root, config, seed, [], look_images)
         (root / RUNS).mkdir(parents=True, exist_ok=True)
         dataset._remove_temporaries()
         dataset._write_manifest()
@@ -262,7 +274,29 @@ class Dataset:
                 problems.append(f"{path}: extra file, not in {MANIFEST}")
         return problems
 
+    def _check_look_images(self, images: dict[str, str] | None) -> None:
+        """A ConfigError naming the images added, removed or changed since the runs were collected; a
+        manifest written before it recorded them (or a folder look added to it) records `images`."""
+        if images is None or images == self.look_images:
+            return
+        if self.look_images is None:
+            self.look_images = images
+            self._write_manifest()
+            return
+        old = self.look_images
+        changes = [f"{what} {', '.join(names)}" for what, names in (
+            ("added", sorted(set(images) - set(old))),
+            ("removed", sorted(set(old) - set(images))),
+            ("changed", sorted(n for n in set(old) & set(images) if old[n] != images[n])),
+        ) if names]
+        look = self.config.get("env", {}).get("world", {}).get("look")
+        raise ConfigError(
+            f"{self.root} was collected with other images in its look folder {look}: "
+            f"{'; '.join(changes)}; restore them, or collect into another folder (or overwrite it)"
+        )
+
     def _write_manifest(self) -> None:
+        images = {} if self.look_images is None else {"look_images": self.look_images}
         write_json(
             self.root / MANIFEST,
             {
@@ -271,6 +305,7 @@ class Dataset:
                 "provenance": provenance(),
                 "seed": self.seed,
                 "config": self.config,
+                **images,
                 "runs": [to_dict(entry) for entry in self.entries()],
             },
         )

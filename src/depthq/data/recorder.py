@@ -35,6 +35,7 @@ from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import PAPER, CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.sim.look import look_images
 from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig, world_for
 
 MAX_DURATION_S = 50.0  # the original's max_duration of a collection run
@@ -187,7 +188,8 @@ def collect(
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     executor.check_shared(out)  # workers write the run files themselves
-    dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite)
+    dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite,
+                             look_images=look_images(config.env.world.look))
     wanted = {"train": config.runs, "val": config.val_runs}
     bar = tqdm(
         total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True

@@ -18,7 +18,14 @@ from typing import Any
 import numpy as np
 
 from depthq.errors import ConfigError
-from depthq.sim.textures import HELDOUT_BANK, TRAINING_BANK, TextureBank, draw_texture, folder_bank
+from depthq.sim.textures import (
+    HELDOUT_BANK,
+    TRAINING_BANK,
+    TextureBank,
+    draw_texture,
+    folder_bank,
+    folder_checksums,
+)
 
 FLAT, COLOURS, TEXTURED, HELDOUT = "flat", "colours", "textured", "heldout"
 LOOKS = (FLAT, COLOURS, TEXTURED, HELDOUT)
@@ -92,6 +99,14 @@ def bank(look: str) -> TextureBank:
     if not Path(look).is_dir():
         raise ConfigError(f"unknown look {look!r}; expected one of {LOOKS} or a folder of images")
     return folder_bank(look)
+
+
+def look_images(look: str) -> dict[str, str] | None:
+    """A folder look's images, SHA-256 by file name (what a dataset collected in it records); None for
+    a named look, whose images ship with the code."""
+    if look in LOOKS:
+        return None
+    return folder_checksums(bank(look))
 
 
 def lighting(look: str) -> Lighting:
