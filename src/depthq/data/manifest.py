@@ -48,6 +48,7 @@ from depthq.configio import from_dict, provenance, read_json, to_dict, write_jso
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
+from depthq.data.samples import MIN_FRAMES, usable
 from depthq.errors import ConfigError, DataError
 from depthq.sim.canyon import PAPER
 from depthq.sim.look import upgrade_world
@@ -184,6 +185,40 @@ class Dataset:
         env = self.config.get("env")
         return None if env is None else env["world"].get("family", PAPER)
 
+    def missing(self, wanted: dict[str, int], min_frames: int) -> list[tuple[str, int]]:
+        """The next runs a collection of `wanted` usable runs per split (at least `min_frames` frames)
+        records: each split's lowest missing indices, enough to cover its deficit."""
+        todo = []
+        for split, n in wanted.items():
+            found, index, deficit = 0, 0, []
+            while found + len(deficit) < n:
+                if self.has(split, index):
+                    found += usable(self.entry(split, index), min_frames)
+                else:
+                    deficit.append((split, index))
+                index += 1
+            todo += deficit
+        return todo
+
+    def incomplete(self) -> str:
+        """'' when the folder holds every run its collection config asks for (a DAgger round's, or an
+        imported recording's, says no count), else what it lacks: a collection that did not finish, or a
+        partial copy."""
+        config = self.config
+        if not self._runs:
+            return f"{self.root}: holds no run ({MANIFEST} lists none)"
+        if not isinstance(config.get("runs"), int) or "rounds" in config or "env" not in config:
+            return ""
+        wanted = {"train": config["runs"], "val": config.get("val_runs", 0)}
+        min_frames = config.get("data", {}).get("min_frames", MIN_FRAMES)
+        todo = self.missing(wanted, min_frames)
+        if not todo:
+            return ""
+        lacking = ", ".join(f"{sum(s == split for s, _ in todo)} of the {n} {split} runs"
+                            for split, n in wanted.items() if any(s == split for s, _ in todo))
+        return (f"{self.root}: lacks {lacking} its config asks for (at least {min_frames} frames each): a "
+                "collection that did not finish or a partial copy; resume the collection, or copy the rest")
+
     def has(self, split: str, index: int) -> bool:
         return (split, index) in self._runs
 
@@ -261,8 +296,9 @@ class Dataset:
             return reader.run(images)
 
     def verify(self, progress: bool = False) -> list[str]:
-        """Read every run in full; one message per missing, extra, truncated, corrupted or odd file."""
-        problems = []
+        """Read every run in full; one message per missing, extra, truncated, corrupted or odd file, and
+        one if the folder holds fewer runs than its config asks for (`incomplete`)."""
+        problems = [problem] if (problem := self.incomplete()) else []
         for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
                 self.read_run(entry)
