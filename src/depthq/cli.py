@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser(verb).parse_args(argv)  # a verb's flags may load MuJoCo, and so fail
         with ExitStack() as held:
             for flag, path in written(args):
-                held.enter_context(exclusive(path, flag))
+                held.enter_context(exclusive(path, flag, verb or ""))
             return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print(f"depthq {verb}: interrupted; run the same command again to resume.", file=sys.stderr)

@@ -50,6 +50,7 @@ from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.data.samples import MIN_FRAMES, usable
 from depthq.errors import ConfigError, DataError
+from depthq.lock import writer
 from depthq.sim.canyon import PAPER
 from depthq.sim.look import upgrade_world
 
@@ -171,6 +172,28 @@ class Dataset:
         """Manifest rows (of one split, or all), sorted by split and index."""
         return [self._runs[key] for key in sorted(self._runs) if split is None or key[0] == split]
 
+    def labeller(self) -> dict[str, str] | None:
+        """The labeller ({"name", "fingerprint"}) whose camera labels the runs hold, None if no run holds
+        any (`depthq.data.camera_labels`); runs labelled by two or more (a `depthq label --replace`
+        stopped part way) are a ConfigError naming each. Read from the files' labels alone: reading the
+        runs as data checks the files."""
+        found: dict[tuple[str, str], int] = {}
+        for entry in self.entries():
+            with RunReader(self.path(entry)) as reader:
+                labels = reader.camera_labels()
+            if labels is not None:
+                key = (labels.labeller, labels.fingerprint)
+                found[key] = found.get(key, 0) + 1
+        if len(found) > 1:
+            each = ", ".join(f"{name} (fingerprint {fp[:16]}…) in {n} runs"
+                             for (name, fp), n in found.items())
+            raise ConfigError(
+                f"{self.root}: its runs hold camera labels of {len(found)} labellers, {each}: a `depthq "
+                f"label --replace` stopped part way; finish it (`depthq label {self.root} --from camera "
+                "--labeller FOLDER --replace`, FOLDER the labeller to keep), then train"
+            )
+        return next(({"name": name, "fingerprint": fp} for name, fp in found), None)
+
     def fingerprint(self) -> str:
         """SHA-256 of the manifest's run rows (split, index, file hash): equal runs, equal fingerprint.
         A checkpoint records it (`depthq.nets.checkpoint.DatasetRecord`), and so does a feature cache."""
@@ -277,10 +300,29 @@ class Dataset:
         self._write_manifest()
         return new
 
+    def check_idle(self) -> None:
+        """A ConfigError if another depthq process is writing the folder now (`depthq.lock.writer`): a
+        `depthq label` rewriting its run files, or a collection adding runs."""
+        held = writer(self.root)
+        if held is None:
+            return
+        pid, verb = held
+        if verb == "label":
+            raise ConfigError(f"{self.root} is being labelled: `depthq label` (PID {pid}) is rewriting its "
+                              "run files with camera labels; wait for it to finish, then run this again")
+        who = f"`depthq {verb}`" if verb else "another depthq process"
+        raise ConfigError(f"{self.root} is being written by {who} (PID {pid}); wait for it to finish, then "
+                          "run this again")
+
     def reader(self, entry: RunEntry) -> RunReader:
         """An open reader of a run's file, checked against its manifest row: its size and hash, then
-        its metadata (so a row edited by hand, its frame count or index, is not read as other data)."""
-        reader = RunReader(self.path(entry), entry.info)
+        its metadata (so a row edited by hand, its frame count or index, is not read as other data). A
+        file that fails its check while another process writes the folder is that (`check_idle`)."""
+        try:
+            reader = RunReader(self.path(entry), entry.info)
+        except DataError:
+            self.check_idle()
+            raise
         if reader.meta != entry.run_meta():
             reader.close()
             differing = _differing_keys(to_dict(reader.meta), to_dict(entry.run_meta()))
