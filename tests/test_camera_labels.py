@@ -4,7 +4,10 @@ runs; the labels live in the run files, read back, train a Depth-Q-Net, and `dat
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +19,7 @@ from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.runfile import file_sha256, write_labelled
 from depthq.data.views import view_arrays
-from depthq.errors import ConfigError
+from depthq.errors import ConfigError, DataError
 from depthq.labellers.labeller import (
     CONFIG,
     WEIGHTS,
@@ -119,7 +122,8 @@ def test_an_old_dataset_reads_unchanged_and_refuses_camera_training(small_datase
 
 
 @pytest.mark.slow
-def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, tmp_path: Path) -> None:
+def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, labeller: Path, tmp_path: Path
+                                                          ) -> None:
     from depthq.policies.registry import make_policy
     from depthq.train.trainer import train
 
@@ -132,6 +136,8 @@ def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, tmp_pa
                 tmp_path / "camera", progress=False)
     record = read_config(out)
     assert record["train"]["labels"] == "camera" and record["head"]["form"] == "depth_first"
+    model = load_labeller(labeller)  # the checkpoint names the labeller its targets came from
+    assert record["dataset"]["labeller"] == {"name": model.record["name"], "fingerprint": model.fingerprint}
     policy = make_policy(str(out))
     assert policy.act({"image": np.zeros((308, 410, 3), np.uint8)}) in (-1.0, 0.0, 1.0)
     stored = json.loads((out / "config.json").read_text())
@@ -183,3 +189,44 @@ def test_bad_inputs_exit_2_and_write_nothing(small_hard_dataset: Path, small_dat
         assert exit_.value.code == 2 and named in capsys.readouterr().err, argv
     assert {root: _state(root) for root in (hard, paper)} == before
     assert not any((tmp_path / name).exists() for name in ("l", "m", "none"))
+
+
+def test_labels_of_two_labellers_or_a_labelling_under_way_are_refused_by_training(
+    small_dataset: Path, tmp_path: Path
+) -> None:
+    from depthq.data.camera_labels import CameraLabels
+    from depthq.train.trainer import train
+
+    root = tmp_path / "data"
+    shutil.copytree(small_dataset, root, ignore=shutil.ignore_patterns("features"))
+    dataset = Dataset.open(root)
+    first, second = "1" * 64, "2" * 64  # two labellers' fingerprints, as a `label --replace` stopped half way
+    for k, entry in enumerate(dataset.entries()):
+        bins = dataset.read_run(entry, images=False).bins
+        dataset.set_camera_labels(entry, CameraLabels(bins, "floor", first if k % 2 else second))
+    config = TrainConfig(model="depth", data=str(root), labels="camera", **TOY_TRAINING)
+    with pytest.raises(ConfigError, match="camera labels of 2 labellers") as refused:
+        train(config, tmp_path / "model", progress=False)
+    assert first[:16] in str(refused.value) and second[:16] in str(refused.value)
+    assert "--replace" in str(refused.value) and not (tmp_path / "model").exists()
+    assert Dataset.open(small_dataset).labeller() is None  # a dataset without camera labels: none
+
+    # `depthq label` rewriting the runs: a training is refused as that, not as a corrupted file
+    entry = dataset.entries()[0]
+    with dataset.reader(entry) as reader:  # the file rewritten, the manifest not yet
+        write_labelled(dataset.path(entry), reader, CameraLabels(reader.run(False).bins, "floor", first))
+    code = (f"from depthq.lock import exclusive\nwith exclusive({str(root)!r}, 'DIR', 'label'):\n"
+            "    print('held', flush=True)\n    import time; time.sleep(60)\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        for attempt in (lambda: train(config, tmp_path / "model", progress=False),
+                        lambda: Dataset.open(root).reader(entry)):
+            with pytest.raises(ConfigError, match=rf"being labelled: `depthq label` \(PID {holder.pid}\)"):
+                attempt()
+    finally:
+        holder.kill()
+        holder.wait()
+    with pytest.raises(DataError, match="corrupted"):  # no labelling under way: the file is what is wrong
+        Dataset.open(root).reader(entry)

@@ -137,3 +137,42 @@ def test_probe_statistics_on_train_canyons_and_no_eval_canyons(tmp_path, capsys)
     assert f"{PAPER_FRAMES_PER_RUN:.1f}" in format_stats([stats])
     assert main(["probe", "--canyons", "eval:0-3", "--out", str(tmp_path / "p")]) == 2
     assert "test set" in capsys.readouterr().err and not (tmp_path / "p").exists()
+
+
+def test_a_collection_in_a_folder_look_does_not_resume_with_other_images(tmp_path, capsys):
+    """The manifest records the look folder's images by SHA-256: a collection resumed after they were
+    added, removed or changed would mix two looks, and is refused naming them, the dataset untouched."""
+    from PIL import Image
+
+    from depthq.checksum import file_sha256
+
+    look = tmp_path / "look"
+    look.mkdir()
+    rng = np.random.default_rng(2)
+    for name in ("a.png", "b.png", "c.png"):
+        Image.fromarray(rng.integers(0, 256, (32, 32, 3), dtype=np.uint8)).save(look / name)
+    out = tmp_path / "data"
+    argv = ["collect", "--look", str(look), "--runs", "2", "--val-runs", "0", "--max-steps", "30",
+            "--workers", "1", "--out", str(out)]
+    assert main(argv) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["look_images"] == {p.name: file_sha256(p) for p in sorted(look.iterdir())}
+    last = manifest["runs"].pop()  # as a collection killed before its last run left it
+    (out / last["file"]).unlink()
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    before = {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    capsys.readouterr()
+    Image.fromarray(np.zeros((32, 32, 3), np.uint8)).save(look / "a.png")  # changed
+    (look / "b.png").unlink()  # removed
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(look / "d.png")  # added
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "added d.png; removed b.png; changed a.png" in err, err
+    assert {p: p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()} == before
+    # a manifest written before it recorded the images resumes, and records them as they are now
+    del manifest["look_images"]
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    assert main(argv) == 0
+    resumed = json.loads((out / "manifest.json").read_text())
+    assert resumed["look_images"] == {p.name: file_sha256(p) for p in sorted(look.iterdir())}
+    assert len(resumed["runs"]) == len(manifest["runs"]) + 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -228,6 +229,28 @@ def test_verify_names_truncated_corrupted_missing_and_extra_files(
     ):
         assert f"{path}: {word}" in err
     assert str(dataset.path(dataset.entries("train")[3])) not in err
+
+
+def test_verify_fails_on_fewer_runs_than_the_config_asks_for_or_none(
+    small_dataset: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    partial = tmp_path / "partial"  # a partial copy: the first 3 runs, and a manifest listing them alone
+    shutil.copytree(small_dataset, partial, ignore=shutil.ignore_patterns("features"))
+    manifest = json.loads((partial / MANIFEST).read_text())
+    for row in manifest["runs"][3:]:
+        (partial / row["file"]).unlink()
+    manifest["runs"] = manifest["runs"][:3]
+    (partial / MANIFEST).write_text(json.dumps(manifest))
+    assert main(["dataset", "verify", str(partial)]) == 1
+    err = capsys.readouterr().err
+    assert "of the 6 train runs, 2 of the 2 val runs its config asks for" in err and "OK" not in err
+    assert main(["dataset", "verify", str(small_dataset)]) == 0  # the whole one
+    capsys.readouterr()
+    empty = tmp_path / "empty"  # what a collection that failed before its first run leaves
+    Dataset.create(empty, Dataset.open(small_dataset).config, seed=0)
+    assert main(["dataset", "verify", str(empty)]) == 1
+    captured = capsys.readouterr()
+    assert "holds no run" in captured.err and "OK" not in captured.out
 
 
 def test_loading_a_damaged_file_raises(tmp_path: Path) -> None:

@@ -77,6 +77,32 @@ def test_disk_full_in_a_worker_is_one_line_and_resumes(small_disk: Path) -> None
     assert_clean(out)
 
 
+def _fill(disk: Path) -> None:
+    """Leave one page free on `disk`, the lock file's (what a long job meets when another fills the disk)."""
+    free = shutil.disk_usage(disk).free
+    with open(disk / "filler", "wb") as f:
+        f.write(b"\0" * (free - 4096))
+
+
+def test_disk_full_in_evaluate_names_its_out_folder(small_disk: Path) -> None:
+    """A write to an open file (the system names no path) is named by the folder the verb writes."""
+    out = small_disk / "eval"
+    _fill(small_disk)
+    full = depthq("evaluate", "heuristic", "--canyons", "val:0", "--time-limit-s", "2", "--workers", "1",
+                  "--out", str(out))
+    assert_one_line(full, "disk full", f"device of {out} (what this command writes")
+    assert not (out / "summary.json").exists()
+
+
+@pytest.mark.slow  # the feature cache of the small dataset, then a training's first save
+def test_disk_full_in_train_names_its_out_folder(small_disk: Path, small_dataset: Path) -> None:
+    out = small_disk / "model"
+    _fill(small_disk)
+    full = depthq("train", "--model", "depth", "--data", str(small_dataset), "--epochs", "1",
+                  "--train-batches", "2", "--val-batches", "1", "--batch-size", "16", "--out", str(out))
+    assert_one_line(full, "disk full", f"device of {out} (what this command writes")
+
+
 @pytest.fixture
 def as_nobody() -> Iterator[tuple[str, Path]]:
     """An unprivileged user and a folder it can reach (pytest's own tmp folders are root's, 0700).

@@ -1,6 +1,11 @@
 """Action selection, Table I metrics, and real evaluations in the evaluation canyons."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -106,3 +111,43 @@ def test_cli_refuses_a_missing_checkpoint_and_an_unknown_canyon_set(tmp_path, ca
     assert main(["evaluate", "heuristic", "--device", "tpu", "--out", str(tmp_path / "o")]) == 2
     assert "'tpu'" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def _processes(group: int) -> list[str]:
+    """The live processes of a process group (a command started in a session of its own), as `ps` shows
+    them; not a zombie (ended, its exit status not yet collected by init, to which it fell)."""
+    shown = subprocess.run(["ps", "-o", "stat=,pid=,args=", "-g", str(group)], capture_output=True, text=True)
+    return [line.strip() for line in shown.stdout.splitlines() if line.strip() and not line.startswith("Z")]
+
+
+def test_a_killed_evaluation_leaves_no_process_and_its_rerun_no_temporary(tmp_path):
+    """kill -9 of `depthq evaluate` mid-run: its workers, fork server and resource tracker end with it
+    (workers watch their parent); the rerun removes the half-written files the kill left."""
+    out = tmp_path / "eval"
+    argv = ["evaluate", "heuristic", "--canyons", "val:0-3", "--time-limit-s", "20", "--workers", "2"]
+    proc = subprocess.Popen([sys.executable, "-m", "depthq.cli", *argv, "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60  # main, resource tracker, fork server, 2 workers
+        while len(_processes(proc.pid)) < 5 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert len(_processes(proc.pid)) >= 5, _processes(proc.pid)
+        time.sleep(1.0)  # the workers driving
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 10  # a few seconds: the workers see it within 1 s on an idle host
+        while _processes(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _processes(proc.pid), _processes(proc.pid)
+    finally:
+        if _processes(proc.pid):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert not (out / "summary.json").exists()
+    out.mkdir(exist_ok=True)
+    stale = [out / ".video.mp4.k1ll3d.mp4", out / ".runs.csv.k1ll3d.tmp"]  # as a kill while writing leaves
+    for path in stale:
+        path.write_bytes(b"half")
+    config = EvalConfig(canyons=("val:0",), time_limit_s=2.0)
+    evaluate("heuristic", out, config, workers=1, progress=False)
+    assert (out / "video.mp4").is_file() and (out / "summary.json").is_file()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]

@@ -3,6 +3,8 @@
 import hashlib
 import json
 import shutil
+import struct
+import zlib
 from dataclasses import replace
 
 import numpy as np
@@ -27,7 +29,7 @@ from depthq.sim.look import (
     upgrade_world,
 )
 from depthq.sim.mjcf import CameraConfig
-from depthq.sim.textures import GENERATORS, HELDOUT_BANK, TRAINING_BANK, draw_texture, photo
+from depthq.sim.textures import GENERATORS, HELDOUT_BANK, TRAINING_BANK, draw_texture, folder_bank, photo
 from depthq.sim.world import WorldConfig, world_for
 
 SMALL = CameraConfig(width=80, height=60)
@@ -249,3 +251,55 @@ def test_bench_sim_measures_several_looks_in_one_call(capsys):
     result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert set(result["looks"]) == {"textured", "broad"} and result["relative"]["textured"] == 1.0
     assert all(e["steps"] == 3 and e["steps_per_s"] > 0 for e in result["looks"].values())
+
+
+def test_images_of_any_mode_and_bit_depth_are_textures_as_they_look(tmp_path):
+    """A 16-bit PNG is scaled to 8 bits (Pillow's own conversion clips it: white), and every other mode
+    keeps its mean grey; transparency shows the white behind it."""
+    rng = np.random.default_rng(5)
+    blocks = rng.integers(2000, 63000, size=(8, 8))  # a 16-bit "photograph": coarse blocks, mean ≈ 0.5
+    sixteen = np.kron(blocks, np.ones((32, 32), np.int64)).astype(np.uint16)
+    Image.fromarray(sixteen).save(tmp_path / "sixteen.png")
+    assert Image.open(tmp_path / "sixteen.png").mode == "I;16"
+    grey = Image.fromarray((sixteen // 257).astype(np.uint8))
+    variants = {"la.png": grey.convert("LA"), "p.png": grey.convert("RGB").convert("P"),
+                "cmyk.jpg": grey.convert("CMYK"), "one.png": grey.convert("1"),
+                "f.tif": Image.fromarray(sixteen.astype(np.float32) / 65535),
+                "rgba.png": grey.convert("RGBA")}
+    for name, image in variants.items():
+        image.save(tmp_path / name)
+    clear = grey.convert("RGBA")
+    clear.putalpha(0)  # wholly transparent: white, whatever colour lies under it
+    clear.save(tmp_path / "clear.png")
+    bank = folder_bank(tmp_path)
+    source = sixteen.mean() / 65535
+    for name in ("sixteen.png", *variants):
+        texture = photo(name, bank.folder)
+        assert texture.shape == (128, 128, 3) and abs(texture.mean() - source) < 0.03, (name, texture.mean())
+    assert photo("clear.png", bank.folder).min() == 1.0
+    frame = _drive(_world("hard", str(tmp_path)), "hard/val:1001", actions=(0.0,))[2]
+    assert 0.05 < frame.mean() / 255 < 0.95  # not washed out
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """A PNG file that says it is `width` × `height` (grey, 8 bits) but holds no pixel: Pillow reads
+    the size from the header alone."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    pixels = chunk(b"IDAT", zlib.compress(b""))
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + pixels + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize("side, said", [(10000, "10000 × 10000 pixels"), (14000, "over 179.0 MP")])
+def test_an_oversized_image_is_refused_in_one_line_before_any_work(tmp_path, capsys, side, said):
+    folder = tmp_path / "look"
+    folder.mkdir()
+    Image.fromarray(np.full((64, 64, 3), 128, np.uint8)).save(folder / "fine.png")
+    (folder / "huge.png").write_bytes(_png_header(side, side))  # over Pillow's decompression-bomb limit
+    out = tmp_path / "data"
+    argv = ["collect", "--look", str(folder), "--runs", "1", "--val-runs", "0", "--out", str(out)]
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "huge.png" in lines[0] and said in lines[0] and "89.5 MP" in lines[0]
+    assert not out.exists()  # no manifest with an empty runs/

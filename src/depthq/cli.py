@@ -75,17 +75,19 @@ def main(argv: list[str] | None = None) -> int:
     verb = next((a for a in argv if not a.startswith("-")), None)  # the global flags take no value
     before_verb = argv[: argv.index(verb)] if verb else argv
     debug = "--debug" in before_verb or os.environ.get(DEBUG_ENV, "") not in ("", "0")
+    writes: list[Path] = []  # the folders the verb writes: named when the system names no path
     try:
         args = build_parser(verb).parse_args(argv)  # a verb's flags may load MuJoCo, and so fail
+        writes = [path for _, path in written(args)]
         with ExitStack() as held:
             for flag, path in written(args):
-                held.enter_context(exclusive(path, flag))
+                held.enter_context(exclusive(path, flag, verb or ""))
             return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print(f"depthq {verb}: interrupted; run the same command again to resume.", file=sys.stderr)
         return 130
     except Exception as err:
-        status, line = explain(err)
+        status, line = explain(err, writes)
         if status is None:
             raise  # a bug, not the input or the machine: the traceback is what helps
         if debug:

@@ -6,7 +6,7 @@ import errno
 import os
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 
@@ -41,14 +41,15 @@ _GRAPHICS = re.compile(r"\b(EGL|OSMesa|OpenGL|gladLoadGL|libGL\S*|libEGL\S*|egl[
 _RESUME = "run the same command to resume"
 
 
-def explain(err: BaseException) -> tuple[int | None, str]:
+def explain(err: BaseException, writes: Sequence[Path] = ()) -> tuple[int | None, str]:
     """(exit status, one line naming the path or library and the cause) for bad input (2), bad data
     (1) or a failing machine (1: disk full, permission denied, out of memory, no OpenGL for MuJoCo),
-    whether raised here or in a worker; (None, "") for anything else, a bug to show in full."""
+    whether raised here or in a worker; (None, "") for anything else, a bug to show in full. `writes`:
+    the folders the command writes, named when the system names no path (a write to an open file)."""
     if isinstance(err, WorkerError):
         if err.error is None:
             return 1, str(err).splitlines()[0]
-        return explain(err.error)
+        return explain(err.error, writes)
     if isinstance(err, ConfigError):
         return 2, f"error: {err}"
     if isinstance(err, DataError):
@@ -60,7 +61,7 @@ def explain(err: BaseException) -> tuple[int | None, str]:
     if graphics:
         return 1, graphics
     if isinstance(err, OSError) and err.errno in _DISK_FULL + _DENIED:
-        where = _where(err)
+        where = _where(err, writes)
         if err.errno in _DISK_FULL:
             return 1, (f"disk full: no space left on the device of {where}; nothing half-written is kept: "
                        f"free space and {_RESUME}")
@@ -69,16 +70,24 @@ def explain(err: BaseException) -> tuple[int | None, str]:
     return None, ""
 
 
-def _where(err: OSError) -> str:
+def _where(err: OSError, writes: Sequence[Path] = ()) -> str:
     """The path an OSError is about, as its nearest existing folder or file (a temporary file that
-    failed is removed by then: its folder is what the user can act on)."""
+    failed is removed by then: its folder is what the user can act on); when the system names none,
+    the folders the command writes (`writes`)."""
     name = err.filename
     if name is None:
         found = _HDF5_NAME.search(str(err))
         name = found.group(1) if found else None
+    if name is None and writes:
+        folders = ", ".join(_existing(Path(p)) for p in writes)
+        return f"{folders} (what this command writes; the system named no file)"
     if name is None:
         return "(a path the system did not name)"
-    path = Path(os.fsdecode(name))
+    return _existing(Path(os.fsdecode(name)))
+
+
+def _existing(path: Path) -> str:
+    """`path`, or its nearest existing parent."""
     while not path.exists() and path != path.parent:
         path = path.parent
     return str(path)

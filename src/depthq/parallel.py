@@ -26,12 +26,14 @@ from __future__ import annotations
 
 import importlib.util
 import multiprocessing as mp
+import multiprocessing.connection
 import os
 import pickle
 import queue
 import secrets
 import shutil
 import signal
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -134,9 +136,26 @@ def _timed(run: Callable[[], object], *_inputs: Any) -> float:
     return round(time.perf_counter() - start, 1)
 
 
+def _die_with_parent() -> None:
+    """In a local worker: exit at once when the process that started it ends, however it ends (kill -9
+    included), rather than wait for tasks forever and keep the fork server alive (it lives while a
+    worker holds its pipe). A daemon thread waits on the parent's sentinel, which the parent's death
+    closes (Linux has no death signal for the parent here: a worker's parent is the fork server)."""
+    parent = mp.parent_process()
+    if parent is None:
+        return
+
+    def watch() -> None:
+        mp.connection.wait([parent.sentinel])
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
 def _serve(make_worker: Callable[[], Worker], tasks, results) -> None:
     """A local worker process: build the state once, then serve tasks until the None sentinel. A
     failure is sent back as (position or None while starting, False, (exception, traceback))."""
+    _die_with_parent()
     position = None
     try:
         worker = make_worker()
@@ -312,6 +331,7 @@ def _run_jobs_ray(jobs: Sequence[Job], address: str | None) -> Iterator[tuple[st
 
 def _on_core(core: int, name: str, run: Callable[[], object], results) -> None:
     """A local job's process: pinned to `core`, it runs the job and sends back its seconds or its error."""
+    _die_with_parent()
     os.sched_setaffinity(0, {core})
     try:
         results.put((name, True, _timed(run)))

@@ -14,6 +14,8 @@ manifest.json:
     seed                        the collection seed
     config                      the collection config that made the runs (a JSON object); a DAgger
                                 round's adds `rounds` (docs/formats.md#manifest)
+    look_images                 only when the look is a folder of images: each image's SHA-256 by file
+                                name, so a collection does not resume with other images
     runs                        one row per completed run, sorted by split and index:
         split, index            "train" | "val", position in that split (the file name says both)
         file                    path relative to DIR, e.g. "runs/train_000123.h5"
@@ -46,7 +48,9 @@ from depthq.configio import from_dict, provenance, read_json, to_dict, write_jso
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
+from depthq.data.samples import MIN_FRAMES, usable
 from depthq.errors import ConfigError, DataError
+from depthq.lock import writer
 from depthq.sim.canyon import PAPER
 from depthq.sim.look import upgrade_world
 
@@ -99,10 +103,12 @@ def run_path(root: Path, split: str, index: int) -> Path:
 class Dataset:
     """A dataset folder. `create` starts or resumes one (the collector), `open` reads one (everyone else)."""
 
-    def __init__(self, root: Path, config: dict[str, Any], seed: int, runs: list[RunEntry]) -> None:
+    def __init__(self, root: Path, config: dict[str, Any], seed: int, runs: list[RunEntry],
+                 look_images: dict[str, str] | None = None) -> None:
         self.root = Path(root)
         self.config = config
         self.seed = seed
+        self.look_images = look_images  # a folder look's images: SHA-256 by file name
         self._runs = {(r.split, r.index): r for r in runs}
 
     @classmethod
@@ -118,16 +124,23 @@ class Dataset:
             if data.get("format") != FORMAT or data.get("format_version") != FORMAT_VERSION:
                 raise ValueError(f"format {data.get('format')!r} version {data.get('format_version')!r}")
             runs = [from_dict(RunEntry, row) for row in data["runs"]]
-            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs)
+            images = data.get("look_images")
+            if images is not None and not (isinstance(images, dict) and all(
+                    isinstance(v, str) for v in images.values())):
+                raise ValueError(f"look_images {images!r}")
+            return cls(root, upgrade_config(data["config"]), int(data["seed"]), runs, images)
         except (AttributeError, KeyError, TypeError, ValueError) as err:
             raise DataError(f"{path}: not a valid {FORMAT} manifest ({err})") from err
 
     @classmethod
-    def create(cls, root: Path, config: dict[str, Any], seed: int, overwrite: bool = False) -> Dataset:
+    def create(cls, root: Path, config: dict[str, Any], seed: int, overwrite: bool = False,
+               look_images: dict[str, str] | None = None) -> Dataset:
         """Start a dataset in `root`, or resume the one there if it was made with the same config and seed.
 
-        A dataset made with another config or seed is a ConfigError naming the differing keys.
-        `overwrite` starts afresh whatever is there: it deletes the manifest and all runs first.
+        A dataset made with another config or seed is a ConfigError naming the differing keys, and so
+        is one whose folder look's images (`look_images`: SHA-256 by name) changed since, naming them;
+        one written before the manifest recorded them takes today's. `overwrite` starts afresh whatever
+        is there: it deletes the manifest and all runs first.
         """
         root = Path(root)
         config = json.loads(json.dumps(config))  # the form it takes in the manifest (tuples become lists)
@@ -144,11 +157,12 @@ class Dataset:
                     f"{root} holds a dataset made with a different configuration (differs in: "
                     f"{', '.join(differing)}); use another folder, or overwrite it"
                 )
+            old._check_look_images(look_images)
             old._remove_temporaries()
             return old
         elif root.exists() and any(p.name != RUNS for p in root.iterdir()):
             raise ConfigError(f"{root}: exists, is not empty and is not a dataset folder (no {MANIFEST})")
-        dataset = cls(root, config, seed, [])
+        dataset = cls(root, config, seed, [], look_images)
         (root / RUNS).mkdir(parents=True, exist_ok=True)
         dataset._remove_temporaries()
         dataset._write_manifest()
@@ -157,6 +171,28 @@ class Dataset:
     def entries(self, split: str | None = None) -> list[RunEntry]:
         """Manifest rows (of one split, or all), sorted by split and index."""
         return [self._runs[key] for key in sorted(self._runs) if split is None or key[0] == split]
+
+    def labeller(self) -> dict[str, str] | None:
+        """The labeller ({"name", "fingerprint"}) whose camera labels the runs hold, None if no run holds
+        any (`depthq.data.camera_labels`); runs labelled by two or more (a `depthq label --replace`
+        stopped part way) are a ConfigError naming each. Read from the files' labels alone: reading the
+        runs as data checks the files."""
+        found: dict[tuple[str, str], int] = {}
+        for entry in self.entries():
+            with RunReader(self.path(entry)) as reader:
+                labels = reader.camera_labels()
+            if labels is not None:
+                key = (labels.labeller, labels.fingerprint)
+                found[key] = found.get(key, 0) + 1
+        if len(found) > 1:
+            each = ", ".join(f"{name} (fingerprint {fp[:16]}…) in {n} runs"
+                             for (name, fp), n in found.items())
+            raise ConfigError(
+                f"{self.root}: its runs hold camera labels of {len(found)} labellers, {each}: a `depthq "
+                f"label --replace` stopped part way; finish it (`depthq label {self.root} --from camera "
+                "--labeller FOLDER --replace`, FOLDER the labeller to keep), then train"
+            )
+        return next(({"name": name, "fingerprint": fp} for name, fp in found), None)
 
     def fingerprint(self) -> str:
         """SHA-256 of the manifest's run rows (split, index, file hash): equal runs, equal fingerprint.
@@ -171,6 +207,40 @@ class Dataset:
         a robot's recording."""
         env = self.config.get("env")
         return None if env is None else env["world"].get("family", PAPER)
+
+    def missing(self, wanted: dict[str, int], min_frames: int) -> list[tuple[str, int]]:
+        """The next runs a collection of `wanted` usable runs per split (at least `min_frames` frames)
+        records: each split's lowest missing indices, enough to cover its deficit."""
+        todo = []
+        for split, n in wanted.items():
+            found, index, deficit = 0, 0, []
+            while found + len(deficit) < n:
+                if self.has(split, index):
+                    found += usable(self.entry(split, index), min_frames)
+                else:
+                    deficit.append((split, index))
+                index += 1
+            todo += deficit
+        return todo
+
+    def incomplete(self) -> str:
+        """'' when the folder holds every run its collection config asks for (a DAgger round's, or an
+        imported recording's, says no count), else what it lacks: a collection that did not finish, or a
+        partial copy."""
+        config = self.config
+        if not self._runs:
+            return f"{self.root}: holds no run ({MANIFEST} lists none)"
+        if not isinstance(config.get("runs"), int) or "rounds" in config or "env" not in config:
+            return ""
+        wanted = {"train": config["runs"], "val": config.get("val_runs", 0)}
+        min_frames = config.get("data", {}).get("min_frames", MIN_FRAMES)
+        todo = self.missing(wanted, min_frames)
+        if not todo:
+            return ""
+        lacking = ", ".join(f"{sum(s == split for s, _ in todo)} of the {n} {split} runs"
+                            for split, n in wanted.items() if any(s == split for s, _ in todo))
+        return (f"{self.root}: lacks {lacking} its config asks for (at least {min_frames} frames each): a "
+                "collection that did not finish or a partial copy; resume the collection, or copy the rest")
 
     def has(self, split: str, index: int) -> bool:
         return (split, index) in self._runs
@@ -230,10 +300,29 @@ class Dataset:
         self._write_manifest()
         return new
 
+    def check_idle(self) -> None:
+        """A ConfigError if another depthq process is writing the folder now (`depthq.lock.writer`): a
+        `depthq label` rewriting its run files, or a collection adding runs."""
+        held = writer(self.root)
+        if held is None:
+            return
+        pid, verb = held
+        if verb == "label":
+            raise ConfigError(f"{self.root} is being labelled: `depthq label` (PID {pid}) is rewriting its "
+                              "run files with camera labels; wait for it to finish, then run this again")
+        who = f"`depthq {verb}`" if verb else "another depthq process"
+        raise ConfigError(f"{self.root} is being written by {who} (PID {pid}); wait for it to finish, then "
+                          "run this again")
+
     def reader(self, entry: RunEntry) -> RunReader:
         """An open reader of a run's file, checked against its manifest row: its size and hash, then
-        its metadata (so a row edited by hand, its frame count or index, is not read as other data)."""
-        reader = RunReader(self.path(entry), entry.info)
+        its metadata (so a row edited by hand, its frame count or index, is not read as other data). A
+        file that fails its check while another process writes the folder is that (`check_idle`)."""
+        try:
+            reader = RunReader(self.path(entry), entry.info)
+        except DataError:
+            self.check_idle()
+            raise
         if reader.meta != entry.run_meta():
             reader.close()
             differing = _differing_keys(to_dict(reader.meta), to_dict(entry.run_meta()))
@@ -249,8 +338,9 @@ class Dataset:
             return reader.run(images)
 
     def verify(self, progress: bool = False) -> list[str]:
-        """Read every run in full; one message per missing, extra, truncated, corrupted or odd file."""
-        problems = []
+        """Read every run in full; one message per missing, extra, truncated, corrupted or odd file, and
+        one if the folder holds fewer runs than its config asks for (`incomplete`)."""
+        problems = [problem] if (problem := self.incomplete()) else []
         for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
                 self.read_run(entry)
@@ -262,7 +352,29 @@ class Dataset:
                 problems.append(f"{path}: extra file, not in {MANIFEST}")
         return problems
 
+    def _check_look_images(self, images: dict[str, str] | None) -> None:
+        """A ConfigError naming the images added, removed or changed since the runs were collected; a
+        manifest written before it recorded them (or a folder look added to it) records `images`."""
+        if images is None or images == self.look_images:
+            return
+        if self.look_images is None:
+            self.look_images = images
+            self._write_manifest()
+            return
+        old = self.look_images
+        changes = [f"{what} {', '.join(names)}" for what, names in (
+            ("added", sorted(set(images) - set(old))),
+            ("removed", sorted(set(old) - set(images))),
+            ("changed", sorted(n for n in set(old) & set(images) if old[n] != images[n])),
+        ) if names]
+        look = self.config.get("env", {}).get("world", {}).get("look")
+        raise ConfigError(
+            f"{self.root} was collected with other images in its look folder {look}: "
+            f"{'; '.join(changes)}; restore them, or collect into another folder (or overwrite it)"
+        )
+
     def _write_manifest(self) -> None:
+        images = {} if self.look_images is None else {"look_images": self.look_images}
         write_json(
             self.root / MANIFEST,
             {
@@ -271,6 +383,7 @@ class Dataset:
                 "provenance": provenance(),
                 "seed": self.seed,
                 "config": self.config,
+                **images,
                 "runs": [to_dict(entry) for entry in self.entries()],
             },
         )

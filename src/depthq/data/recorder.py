@@ -30,11 +30,11 @@ from depthq.data import StorageConfig
 from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
-from depthq.data.samples import usable as is_usable
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
 from depthq.sim.canyon import PAPER, CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
+from depthq.sim.look import look_images
 from depthq.sim.world import DEFAULT_DECISION_HZ, TURTLEBOT3_MAX_YAW_RATE, WorldConfig, world_for
 
 MAX_DURATION_S = 50.0  # the original's max_duration of a collection run
@@ -187,14 +187,15 @@ def collect(
     if workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {workers}")
     executor.check_shared(out)  # workers write the run files themselves
-    dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite)
+    dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite,
+                             look_images=look_images(config.env.world.look))
     wanted = {"train": config.runs, "val": config.val_runs}
     bar = tqdm(
         total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True
     )
     steps, start = 0, time.perf_counter()
     try:
-        while todo := _missing(dataset, wanted, config.data.min_frames):
+        while todo := dataset.missing(wanted, config.data.min_frames):
             bar.n = sum(wanted.values()) - len(todo)
             bar.refresh()
             for meta, info in _run_all(todo, config, config.seed, dataset, workers, executor):
@@ -214,22 +215,7 @@ def collection_complete(out: Path, config: CollectConfig) -> bool:
     dataset = Dataset.open(Path(out))
     if dataset.config != config.recorded() or dataset.seed != config.seed:
         return False
-    return not _missing(dataset, {"train": config.runs, "val": config.val_runs}, config.data.min_frames)
-
-
-def _missing(dataset: Dataset, wanted: dict[str, int], min_frames: int) -> list[tuple[str, int]]:
-    """The next runs to collect: each split's lowest missing indices, enough to cover its deficit."""
-    todo = []
-    for split, n in wanted.items():
-        usable, index, deficit = 0, 0, []
-        while usable + len(deficit) < n:
-            if dataset.has(split, index):
-                usable += is_usable(dataset.entry(split, index), min_frames)
-            else:
-                deficit.append((split, index))
-            index += 1
-        todo += deficit
-    return todo
+    return not dataset.missing({"train": config.runs, "val": config.val_runs}, config.data.min_frames)
 
 
 def _run_all(

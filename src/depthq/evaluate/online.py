@@ -342,6 +342,7 @@ def evaluate(
         dataset = training_data(read_config(policy_spec.checkpoint), data)
     config = at_policy_rate(config, policy_spec)
     (Path(out) / SUMMARY).unlink(missing_ok=True)  # an evaluation redone reads as not done until it is
+    _remove_temporaries(Path(out))
     start = time.perf_counter()
     ordered = drive_canyons(policy_spec, config, workers, progress, where, video, executor)
     offline = None
@@ -378,6 +379,14 @@ def evaluation_done(folder: Path) -> bool:
         return True  # weights chosen explicitly, or not a checkpoint (or no longer there to ask)
     acts = weights_stem(chosen_weights(read_config(checkpoint), None, checkpoint))
     return summary["policy"]["weights"] == acts
+
+
+def _remove_temporaries(out: Path) -> None:
+    """The temporary files a killed evaluation left in `out` half-written: its files' (`.NAME.*.tmp`) and
+    its video's (`.video.mp4.*.mp4`, `depthq.evaluate.video`). Its one writer is this process: `depthq
+    .lock` holds the folder for the verb, and for the sweep that runs it."""
+    for tmp in (*out.glob(".*.tmp"), *out.glob(".*.mp4")):
+        tmp.unlink(missing_ok=True)
 
 
 def _write(out: Path, summary: dict[str, Any], runs: list[dict[str, Any]], video_fps: float) -> None:

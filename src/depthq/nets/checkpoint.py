@@ -20,7 +20,8 @@ config.json (format version 3):
     head, trunk, trunk_frozen, input_size, learning_rate
                              the network, rebuilt from these
     dataset                  `DatasetRecord`: its absolute path, fingerprint and env config as its
-                             manifest records it (null for a robot's recording)
+                             manifest records it (null for a robot's recording), and the labeller
+                             of its camera labels when it learnt from them
     policy                   `PolicyRecord`: decision rate, camera frame size, candidate actions,
                              the rule that picks one (`rule`) and depth bins
 
@@ -48,7 +49,7 @@ import json
 import math
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +59,7 @@ from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 
 from depthq.checksum import read_checked_json, write_checked_json
-from depthq.configio import from_dict, provenance, to_dict
+from depthq.configio import OMIT_DEFAULT, from_dict, provenance, to_dict
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
 from depthq.nets.heads import HeadConfig, QNet
@@ -91,6 +92,9 @@ class DatasetRecord:
     path: str  # absolute
     fingerprint: str | None  # `depthq.data.manifest.Dataset.fingerprint`; None in a version-1 record
     env: dict[str, Any] | None  # the manifest's "env" block, verbatim; None for a robot's recording
+    # The labeller of the camera labels it learnt from ({"name", "fingerprint"}, `TrainConfig.labels`
+    # "camera"); absent when it learnt from the LiDAR, and in a record written before the field.
+    labeller: dict[str, str] | None = field(default=None, metadata=OMIT_DEFAULT)
 
     @property
     def family(self) -> str | None:

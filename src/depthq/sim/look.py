@@ -22,7 +22,14 @@ import numpy as np
 from depthq.errors import ConfigError
 from depthq.sim.broad import draw_broad_texture
 from depthq.sim.camera_model import ImagingConfig
-from depthq.sim.textures import HELDOUT_BANK, TRAINING_BANK, TextureBank, draw_texture, folder_bank
+from depthq.sim.textures import (
+    HELDOUT_BANK,
+    TRAINING_BANK,
+    TextureBank,
+    draw_texture,
+    folder_bank,
+    folder_checksums,
+)
 
 FLAT, COLOURS, TEXTURED, HELDOUT, BROAD = "flat", "colours", "textured", "heldout", "broad"
 LOOKS = (FLAT, COLOURS, TEXTURED, HELDOUT, BROAD)
@@ -116,6 +123,14 @@ def bank(look: str) -> TextureBank:
     if not Path(look).is_dir():
         raise ConfigError(f"unknown look {look!r}; expected one of {LOOKS} or a folder of images")
     return folder_bank(look)
+
+
+def look_images(look: str) -> dict[str, str] | None:
+    """A folder look's images, SHA-256 by file name (what a dataset collected in it records); None for
+    a named look, whose images ship with the code."""
+    if look in LOOKS:
+        return None
+    return folder_checksums(bank(look))
 
 
 def lighting(look: str) -> Lighting:

@@ -1,7 +1,9 @@
 """Texture banks of the textured looks (docs/design.md#looks): real photographs that scikit-image
 ships inside its wheel, procedural patterns seeded by the canyon, or a user's folder of images.
 
-A texture is a square uint8 RGB image that tiles: MuJoCo repeats it every `TEXTURE_METRES` m on the
+A source image of any mode and bit depth is read as it looks (`rgb8`: 16-bit grey scaled, transparency
+over white); a user's image over `MAX_PIXELS` is refused when its folder is named as a look, before
+any work. A texture is a square uint8 RGB image that tiles: MuJoCo repeats it every `TEXTURE_METRES` m on the
 walls, pillars and floor (`depthq.sim.mjcf`). `draw_texture` picks a source from a bank and draws its
 scale (how many copies of the source fill one repeat), offset (a cyclic shift) and tint.
 
@@ -12,13 +14,15 @@ generator setting: the held-out patterns are other generators altogether.
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
+from PIL import Image, ImageOps
 
+from depthq.checksum import file_sha256
 from depthq.errors import ConfigError
 
 TEXTURE_SIZE = 128  # pixels a side of every texture: 64 px per metre (256 costs ×1.3 per frame)
@@ -26,6 +30,12 @@ TEXTURE_METRES = 2.0  # one texture repeat spans this many metres of wall or flo
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 # Copies of the source across one repeat: the source spans 2, 1, 0.67 or 0.5 m.
 SCALES = (1, 2, 3, 4)
+# The largest source image a look folder may hold: Pillow's decompression-bomb threshold (89.5 MP, a
+# 50 MP phone photograph passes); a larger one would take seconds and gigabytes to decode per worker,
+# for a texture of TEXTURE_SIZE pixels a side.
+MAX_PIXELS = Image.MAX_IMAGE_PIXELS
+_SIXTEEN_BIT = ("I;16", "I;16L", "I;16B", "I;16N", "I")  # Pillow's modes of 16-bit grey (PNG, TIFF)
+_ALPHA = ("RGBA", "LA", "PA", "RGBa", "La")
 
 
 @dataclass(frozen=True)
@@ -224,14 +234,66 @@ HELDOUT_BANK = TextureBank(
 
 
 def folder_bank(folder: str | Path) -> TextureBank:
-    """A user's folder of images as a bank: every image file directly in it (sorted by name)."""
+    """A user's folder of images as a bank: every image file directly in it (sorted by name), each
+    checked to be at most `MAX_PIXELS`."""
     path = Path(folder)
     if not path.is_dir():
         raise ConfigError(f"look {str(folder)!r}: not a look name nor a folder")
     images = sorted(p.name for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
     if not images:
         raise ConfigError(f"look folder {str(folder)!r} holds no image ({', '.join(IMAGE_SUFFIXES)})")
+    for name in images:
+        stat = (path / name).stat()
+        _check_size(str(path.resolve() / name), stat.st_mtime_ns, stat.st_size)
     return TextureBank(f"folder:{path.resolve()}", photos=tuple(images), folder=str(path.resolve()))
+
+
+def folder_checksums(bank: TextureBank) -> dict[str, str]:
+    """The SHA-256 of each image of a folder's bank, by file name (a dataset's manifest records them)."""
+    if bank.folder is None:
+        raise ConfigError(f"texture bank {bank.name!r} is not a folder of images")
+    return {name: file_sha256(Path(bank.folder) / name) for name in bank.photos}
+
+
+@functools.lru_cache(maxsize=1024)
+def _check_size(path: str, mtime_ns: int, size: int) -> None:
+    """A ConfigError naming the image at `path` if it is over `MAX_PIXELS` (its header read; once per
+    version of the file, which `mtime_ns` and `size` tell apart)."""
+    limit = f"the limit of {MAX_PIXELS / 1e6:.1f} MP for a texture source ({TEXTURE_SIZE} px a side " \
+            "is what a texture keeps): shrink it or move it out of the look folder"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as image:
+                width, height = image.size
+    except Image.DecompressionBombError:
+        over = 2 * MAX_PIXELS / 1e6
+        raise ConfigError(f"texture image {path!r}: over {over:.1f} MP, over {limit}") from None
+    except (OSError, ValueError) as err:
+        raise ConfigError(f"texture image {path!r} cannot be read ({err})") from err
+    if width * height > MAX_PIXELS:
+        raise ConfigError(f"texture image {path!r}: {width} × {height} pixels "
+                          f"({width * height / 1e6:.1f} MP), over {limit}")
+
+
+def rgb8(image: Image.Image) -> Image.Image:
+    """`image` as 8-bit RGB, as an image viewer shows it: turned by its EXIF orientation, 16-bit grey
+    scaled to 8 bits (÷ 257; Pillow's own conversion clips it, white), float grey in [0, 1] scaled to
+    255 (larger values taken as 8-bit levels), transparency over white; every other mode (L, 1, P,
+    CMYK, YCbCr, RGB of 16 bits, which Pillow reads as 8) by Pillow's conversion."""
+    image = ImageOps.exif_transpose(image)
+    if image.mode in _SIXTEEN_BIT or image.mode == "F":
+        values = np.asarray(image, np.float64)
+        if image.mode in _SIXTEEN_BIT:
+            values = values / 257.0
+        elif values.size and np.nanmax(values) <= 1.0:
+            values = values * 255.0
+        grey = np.clip(np.rint(np.nan_to_num(values)), 0, 255).astype(np.uint8)
+        return Image.fromarray(grey).convert("RGB")
+    if image.mode in _ALPHA or "transparency" in image.info:
+        rgba = image.convert("RGBA")
+        return Image.alpha_composite(Image.new("RGBA", rgba.size, (255, 255, 255, 255)), rgba).convert("RGB")
+    return image.convert("RGB")
 
 
 def photo(name: str, folder: str | None = None, size: int = TEXTURE_SIZE) -> np.ndarray:
@@ -257,8 +319,8 @@ def _square(name: str, folder: str | None) -> Image.Image:
         path = Path(folder) / name
     try:
         with path.open("rb") as f, Image.open(f) as image:
-            rgb = image.convert("RGB")
-    except (OSError, ValueError) as err:
+            rgb = rgb8(image)
+    except (OSError, ValueError, Image.DecompressionBombError) as err:
         raise ConfigError(f"texture image {str(path)!r} cannot be read ({err})") from err
     w, h = rgb.size
     side = min(w, h)

@@ -154,10 +154,12 @@ def remove_temporaries(out: Path) -> None:
 
 
 def record_training(
-    out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str, threads: int | None = None
+    out: Path, config: TrainConfig, dataset: Dataset, fingerprint: str, threads: int | None = None,
+    labeller: dict[str, str] | None = None,
 ) -> None:
     """config.json: the training, its dataset (absolute path, fingerprint, env config as its manifest
-    records it) and what a policy of it needs (`depthq.nets.checkpoint.PolicyRecord`)."""
+    records it, the `labeller` of the camera labels it learns from) and what a policy of it needs
+    (`depthq.nets.checkpoint.PolicyRecord`)."""
     env = dataset.config.get("env")  # none in a robot's recording
     with dataset.reader(dataset.entries("train")[0]) as reader:
         height, width, _ = reader.image_shape
@@ -168,7 +170,7 @@ def record_training(
     else:
         rate, bins = env["world"]["decision_hz"], env["bins"]
     policy = PolicyRecord(float(rate), (height, width), ACTIONS, get_network(config.model).rule, bins)
-    where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env)
+    where = DatasetRecord(str(dataset.root.resolve()), fingerprint, env, labeller)
     write_record(out, to_dict(config), config.head(), config.learning_rate, where, policy, threads)
 
 

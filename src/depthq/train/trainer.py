@@ -52,6 +52,8 @@ def train(
     out = Path(out)
     where = resolve_device(device)
     dataset = Dataset.open(Path(config.data))
+    dataset.check_idle()  # not while `depthq label` rewrites its runs
+    labeller = dataset.labeller() if config.labels == "camera" else None  # one, or refused
     fingerprint = dataset.fingerprint()
     resuming = folder.check_folder(out, config, fingerprint)
     if resuming and folder.saved_epoch(out) >= config.epochs:
@@ -60,7 +62,7 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     folder.remove_temporaries(out)
     torch.set_num_threads(threads or cores())
-    folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads())
+    folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads(), labeller)
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
