@@ -1,5 +1,5 @@
 """Looks (docs/design.md#looks): the same pose in every look, and which value signal transfers across
-looks (issue #45 item 3).
+looks (issue #45 item 3; docs/research/looks.md).
 
     python -m research.looks figure [DOCS]          # DOCS/looks.png (default docs/)
     python -m research.looks run OUT [--runs 500] [--seeds 0-2] [--canyons hard/eval]
@@ -97,7 +97,7 @@ NOT_MEASURED = "not yet measured"
 
 # Every setting the experiment's nets train with (TrainConfig field paths; "lr" the effective rate),
 # as the `hard` preset and the defaults of commit 0ab0c20 gave them, where the run behind
-# docs/design.md#looks started. `run` gives every training the pinned values today's preset and
+# docs/research/looks.md started. `run` gives every training the pinned values today's preset and
 # defaults no longer hold (none on that commit), so the documented command trains the same nets on a
 # later commit. The camera-label Depth-Q-Net trains as the LiDAR one (`camera_labels.camera_config`),
 # on camera labels.

@@ -1,5 +1,5 @@
 """Which weights a checkpoint acts with, looked at on its own validation frames
-(docs/design.md#weights-check).
+(docs/research/weights_check.md).
 
     python -m research.weights_check CHECKPOINT [--weights final,best,average] [--frames 500]
     python -m research.weights_check CHECKPOINT --canyons hard/val:1000-1004 --out OUT

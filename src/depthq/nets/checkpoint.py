@@ -77,7 +77,7 @@ WEIGHTS = ("best", "final", "average")
 # A weight average worse than the final weights on validation by more than this many standard errors
 # is not acted with by default (`average_fails`): 1.1–3.6 for the six broken averages found on `val`
 # (each drove less far than its final weights), at most 0.73 for the others but one (1.02, as far
-# with either) (docs/design.md#weights-check).
+# with either) (docs/research/weights_check.md#weights-check).
 AVERAGE_TOLERANCE_SE = 1.0
 DIGEST = "sha256"
 # weights → weight file
@@ -162,7 +162,7 @@ def average_fails(folder: Path, record: dict[str, Any]) -> bool:
     """Whether the weight average is worse than the final weights on validation by more than
     `AVERAGE_TOLERANCE_SE` standard errors (`average_margin`): averaging an epoch in which an output
     unit was dead with epochs in which it lived leaves a phantom obstacle the loss shows
-    (docs/design.md#weights-check). False where the margin cannot be computed."""
+    (docs/research/weights_check.md#weights-check). False where the margin cannot be computed."""
     margin = average_margin(folder, record)
     return margin is not None and margin > AVERAGE_TOLERANCE_SE
 

@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     average = read_sidecar(out, "average") if config.average else None
     also = f", average.safetensors: epochs {average['epochs'][0]}–{average['epochs'][1]}" if average else ""
     acts = chosen_weights(read_config(out), None, out)
-    why = "" if acts == config.weights else f" ({config.weights} fails its check: design.md#weights-check)"
+    why = "" if acts == config.weights else f" ({config.weights} fails its check: design.md#weight-average)"
     print(f"checkpoint: {out} (best.safetensors: epoch {best['epoch']}, "
           f"last.safetensors: epoch {last['epoch']}{also}; acts with {acts}{why})")
     for name, row in (("best", best), ("last", last)):
