@@ -49,11 +49,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.fixture(scope="session")
 def smoke(tmp_path_factory):
-    """The smoke preset run end to end on this machine's processes (about a minute)."""
+    """The smoke preset run end to end on this machine's processes (about a minute), under umask 022
+    (tests/test_reproduce.py checks every file's mode)."""
     from depthq.report.reproduce import reproduce
 
     out = tmp_path_factory.mktemp("smoke") / "out"
-    reproduce("smoke", out, progress=False)
+    old = os.umask(0o022)
+    try:
+        reproduce("smoke", out, progress=False)
+    finally:
+        os.umask(old)
     return out
 
 

@@ -59,7 +59,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from tqdm import tqdm
 
-from depthq.configio import to_dict
+from depthq.configio import to_dict, umask
 from depthq.data.manifest import Dataset
 from depthq.data.run import Run, RunMeta
 from depthq.data.runfile import JPEG_QUALITY
@@ -300,6 +300,7 @@ def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), prog
         for stale in out.parent.glob(f".{out.name}.*.tmp"):  # a killed import's (its --out is locked)
             shutil.rmtree(stale, ignore_errors=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+        staging.chmod(0o777 & ~umask())  # the dataset's folder: as `mkdir` would make it, not mkdtemp's 0o700
         try:
             record = {"source": rec.source, "bag": bag.name, **to_dict(config)}
             dataset = Dataset.create(staging, record, seed=0)
