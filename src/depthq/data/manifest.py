@@ -40,13 +40,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
 from depthq.errors import ConfigError, DataError
+from depthq.progress import Bar
 from depthq.sim.canyon import PAPER
 from depthq.sim.look import upgrade_world
 
@@ -251,7 +250,7 @@ class Dataset:
     def verify(self, progress: bool = False) -> list[str]:
         """Read every run in full; one message per missing, extra, truncated, corrupted or odd file."""
         problems = []
-        for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
+        for entry in Bar(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
                 self.read_run(entry)
             except DataError as err:
