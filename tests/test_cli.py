@@ -104,3 +104,19 @@ def test_the_cli_reference_page_is_current() -> None:
     page = Path(__file__).parents[1] / "docs" / "cli.md"
     assert page.read_text() == reference(), "docs/cli.md is stale: python -m depthq.cli_reference docs/cli.md"
     assert "## `depthq train`" in page.read_text() and "--epochs" in page.read_text()
+
+
+def test_no_help_text_leaks_a_source_comments_directive() -> None:
+    """Flags' help comes from the comments beside config fields (`depthq.flags.field_help`); a tool's
+    directive there (`# type: ignore[...]`, `# noqa`) is not help. Every verb's and sub-command's help."""
+    import re
+
+    from depthq.cli_reference import reference
+    from depthq.flags import field_help
+    from depthq.sim.world import WorldConfig
+
+    page = reference()
+    assert "--family" in page and "--rule" in page  # the flags whose comments carry a directive
+    leaks = [line for line in page.splitlines() if re.search(r"type:|noqa|pragma:", line)]
+    assert not leaks, leaks
+    assert field_help(WorldConfig)["family"].startswith("The canyon family")
