@@ -12,7 +12,7 @@ from depthq.pipeline.sweep import Sweep, retarget
 from depthq.sim.world import NOMINAL_DECISION_HZ
 
 PRESETS: dict[str, Sweep] = {
-    # A few minutes end to end; the test suite runs it.
+    # Under a minute end to end (`depthq.pipeline.preset_times`); the test suite runs it.
     "smoke": Sweep(
         "smoke",
         collect=CollectConfig(runs=6, val_runs=2, max_steps=60),
@@ -22,7 +22,7 @@ PRESETS: dict[str, Sweep] = {
         canyons="eval:0-1",
         evaluate=(("time_limit_s", 5.0),),
     ),
-    # Same pipeline, fewer sizes and seeds: under 45 minutes on 2 CPU cores.
+    # Same pipeline, fewer sizes and seeds.
     "quick": Sweep(
         "quick",
         collect=CollectConfig(runs=200, val_runs=20, max_steps=600),

@@ -7,10 +7,12 @@ from pathlib import Path
 
 from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
+from depthq.pipeline.preset_times import DEFAULT_PRESET, DURATIONS, presets_help
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="quick", help="smoke (≈ 5 min), quick (≤ 45 min) or paper (≤ 3 h)")
+    p.add_argument("--preset", default=DEFAULT_PRESET, metavar="{" + ",".join(DURATIONS) + "}",
+                   help=presets_help())
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed when run again)")
     p.add_argument("--device", default="auto", help=DEVICE_HELP)
     add_executor_arguments(p)
