@@ -44,7 +44,6 @@ from typing import Any
 
 import numpy as np
 from PIL import Image, ImageDraw
-from tqdm import tqdm
 
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
@@ -64,6 +63,7 @@ from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import Model, Settings, Sweep, parse_ints, retarget, widened
+from depthq.progress import Bar
 from depthq.report import html as page
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, mean_interval
@@ -234,7 +234,7 @@ def labeller_errors(labellers: list[Path], data: Path, split: str = "val", progr
                           f"{', '.join(map(str, labellers))} on")
     lidar: list[np.ndarray] = []
     camera: list[list[np.ndarray]] = [[] for _ in loaded]
-    bar = tqdm(entries, desc=f"labellers on {Path(data).parent.name}", unit="run", disable=not progress)
+    bar = Bar(entries, desc=f"labellers on {Path(data).parent.name}", unit="run", disable=not progress)
     for entry in bar:
         one = dataset.read_run(entry, images=True)
         lidar.append(one.bins)

@@ -41,19 +41,27 @@ def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The tests that start Ray run in one worker, one after another (`--dist loadgroup`): a second
-    Ray runtime on the same machine would compete for its ports and temp folders."""
+    Ray runtime on the same machine would compete for its ports and temp folders. A test that needs
+    the smoke preset's run (the `smoke` fixture) is `slow`, so the fast loop never runs the preset."""
     for item in items:
         if item.get_closest_marker("ray"):
             item.add_marker(pytest.mark.xdist_group("ray"))
+        if "smoke" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session")
 def smoke(tmp_path_factory):
-    """The smoke preset run end to end on this machine's processes (about a minute)."""
+    """The smoke preset run end to end on this machine's processes (about a minute), under umask 022
+    (tests/test_reproduce.py checks every file's mode)."""
     from depthq.report.reproduce import reproduce
 
     out = tmp_path_factory.mktemp("smoke") / "out"
-    reproduce("smoke", out, progress=False)
+    old = os.umask(0o022)
+    try:
+        reproduce("smoke", out, progress=False)
+    finally:
+        os.umask(old)
     return out
 
 

@@ -182,3 +182,19 @@ def test_a_stage_run_by_the_command_a_dry_run_printed_reads_as_done(
     assert main(dry) == 0
     printed = capsys.readouterr().out
     assert "stages (12 of 13 to run)" in printed and "[done  ] depthq evaluate heuristic" in printed
+
+
+def test_no_help_text_leaks_a_source_comments_directive() -> None:
+    """Flags' help comes from the comments beside config fields (`depthq.flags.field_help`); a tool's
+    directive there (`# type: ignore[...]`, `# noqa`) is not help. Every verb's and sub-command's help."""
+    import re
+
+    from depthq.cli_reference import reference
+    from depthq.flags import field_help
+    from depthq.sim.world import WorldConfig
+
+    page = reference()
+    assert "--family" in page and "--rule" in page  # the flags whose comments carry a directive
+    leaks = [line for line in page.splitlines() if re.search(r"type:|noqa|pragma:", line)]
+    assert not leaks, leaks
+    assert field_help(WorldConfig)["family"].startswith("The canyon family")

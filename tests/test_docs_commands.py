@@ -7,11 +7,14 @@ tests/test_cluster.py)."""
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
+from PIL import Image
 
 from depthq.cli import build_parser, main
 
@@ -57,19 +60,55 @@ def test_the_ros_and_cluster_guides_commands_parse(page: str) -> None:
             assert stop.code == 0 and "--help" in argv, argv
 
 
+def _photos(folder: Path) -> None:
+    """A user's folder of "photographs" (Getting started's `~/lab_photos`): coarse random blocks."""
+    folder.mkdir()
+    rng = np.random.default_rng(7)
+    for k in range(3):
+        blocks = rng.integers(0, 256, size=(4, 4, 3), dtype=np.uint8)
+        Image.fromarray(np.kron(blocks, np.ones((16, 16, 1), np.uint8))).save(folder / f"wall{k}.png")
+
+
+def test_every_bash_block_of_getting_started_is_run() -> None:
+    """Getting started says every command on it runs here: each of its blocks is a `bash` block (the
+    ones `_commands` reads) of `depthq` lines, or the install line (which CI's own venv runs)."""
+    page = (DOCS / "getting-started.md").read_text()
+    fences = re.findall(r"^```(\w*)\n(.*?)^```", page, flags=re.S | re.M)
+    assert fences and all(language == "bash" for language, _ in fences), [f[0] for f in fences]
+    for _, block in fences:
+        lines = [line for line in block.splitlines() if line.strip()]
+        assert all(line.startswith("depthq ") for line in lines) or "pip install" in block, block
+
+
+def test_ci_runs_the_readmes_test_command_and_install() -> None:
+    """`.ci/run` runs the README's command 2 as written (its venv named .venv-ci), and that command
+    installs torch as the README's install line does (the CPU build, from PyTorch's CPU index)."""
+    readme = (DOCS.parent / "README.md").read_text()
+    command = next(line for line in readme.splitlines()
+                   if line.startswith("python3 -m venv") and "pytest" in line)
+    ci = (DOCS.parent / ".ci" / "run").read_text()
+    assert command.replace(".venv", ".venv-ci") in ci.splitlines()
+    install = re.search(r"```bash\n(python3 -m venv .*)\n```", readme).group(1)
+    assert install.split(" && ")[2] == command.split(" && ")[2]
+    assert "--index-url https://download.pytorch.org/whl/cpu" in install
+
+
 @pytest.mark.slow
 def test_user_docs_commands_run_as_written(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     commands = [c for page in PAGES for c in _commands(DOCS / page)]
     assert commands[0][:3] == ["reproduce", "--preset", "smoke"]
     monkeypatch.chdir(tmp_path)
-    for argv in commands:
+    monkeypatch.setenv("HOME", str(tmp_path))  # `~` as the shell expands it: this folder
+    _photos(tmp_path / "lab_photos")
+    for argv in ([os.path.expanduser(a) for a in c] for c in commands):
         verb = argv[0]
         if verb in PARSED_ONLY:
             build_parser(verb).parse_args(argv)
             continue
         assert main([*argv, *TOY.get(verb, [])]) == 0, argv
     for written in ("runs/dqn/config.json", "runs/dqn-eval/summary.json", "runs/dqn-camera/config.json",
-                    "runs/robot-dqn/config.json", "runs/onnx", "runs/dqn-heldout/summary.json"):
+                    "runs/robot-dqn/config.json", "runs/onnx", "runs/dqn-heldout/summary.json",
+                    "runs/dqn-look/summary.json", "runs/lab-data/manifest.json", "runs/dqn-lab/summary.json"):
         assert (tmp_path / written).exists(), written
     assert any((tmp_path / "runs/drive").iterdir())
 

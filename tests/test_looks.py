@@ -192,8 +192,10 @@ def test_a_folder_of_images_is_a_look(tmp_path):
     for look in ("textured", "heldout"):
         built_in = _drive(_world("hard", look), "hard/val:1001", actions=(0.0,))[2]
         assert np.abs(own.astype(int) - built_in.astype(int)).mean() > 5
-    with pytest.raises(ConfigError, match="missing"):
+    with pytest.raises(ConfigError, match=f"the folder {tmp_path / 'missing'} does not exist"):
         WorldConfig(look=str(tmp_path / "missing"))
+    with pytest.raises(ConfigError, match="is a file"):
+        WorldConfig(look=str(tmp_path / "notes.txt"))
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(ConfigError, match="holds no image"):

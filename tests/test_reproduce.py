@@ -58,6 +58,18 @@ def test_report_is_self_contained_and_references_only_existing_files(smoke):
     assert "The paper&#x27;s claims here" in html or "The paper's claims here" in html
 
 
+@pytest.mark.slow
+def test_every_file_and_folder_has_the_mode_the_umask_gives(smoke):
+    """Made under umask 022 (the fixture): report, JSON, CSV, safetensors, run files, video all 0o644,
+    folders 0o755, as `open()` and `mkdir` give them (the atomic writes' temporaries were 0o600)."""
+    paths = [smoke, *smoke.rglob("*")]
+    wrong = {str(p.relative_to(smoke)): oct(p.stat().st_mode & 0o777) for p in paths
+             if p.stat().st_mode & 0o777 != (0o755 if p.is_dir() else 0o644)}
+    assert not wrong, wrong
+    suffixes = {p.suffix for p in paths}
+    assert {".html", ".json", ".csv", ".safetensors", ".h5", ".md", ".mp4"} <= suffixes, suffixes
+
+
 def test_every_claim_and_deviation_of_the_report_points_at_an_existing_docs_page():
     findings = read_findings()
     root = Path(__file__).resolve().parents[1]

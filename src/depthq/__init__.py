@@ -5,8 +5,8 @@ layer, a module, so the folders show the layers (tests/test_layers.py reads this
 source against it, folders and files):
 
     errors, configio, checksum, lock,       base: no layer below (checksum: the SHA-256 a JSON record
-    parallel, flags,                        or file carries; lock: a folder's one writer)
-    host
+    parallel, flags, progress,              or file carries; lock: a folder's one writer; progress:
+    host                                    bars quiet without a terminal)
     ← sim                                   canyons, MuJoCo world, sensors, the Gymnasium env
     ← control                               the Policy interface, OU exploration, the depth heuristic,
                                             action selection rules (collection drives them)

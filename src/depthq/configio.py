@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import json
@@ -10,6 +11,7 @@ import os
 import tempfile
 import types
 import typing
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -136,20 +138,55 @@ def check_seed(seed: object, flag: str = "--seed") -> None:
         raise ConfigError(f"{flag} must be an integer >= 0 (and < 2**63), got {seed!r}")
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write to a temporary sibling, fsync, rename: a reader never sees half a file."""
+def umask() -> int:
+    """The process's umask, left as it is: read from /proc/self/status where the system has it (Linux);
+    else set and restored, 0o077 meanwhile, so a file another thread makes then is stricter, not looser."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o077)
+    os.umask(mask)
+    return mask
+
+
+def temp_sibling(path: Path, suffix: str = ".tmp") -> Path:
+    """A new empty file beside `path` (`.NAME.XXXX{suffix}`), to be renamed onto it once written, with the
+    mode `open()` would give `path` (0o666 less the umask; tempfile's own 0o600 would lock others out)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
+        os.fchmod(fd, 0o666 & ~umask())
+    except BaseException:
+        Path(name).unlink(missing_ok=True)
+        raise
+    finally:
+        os.close(fd)
+    return Path(name)
+
+
+@contextlib.contextmanager
+def atomic_file(path: Path) -> Iterator[Path]:
+    """A `temp_sibling` of `path` for the block to write; fsynced and renamed onto `path` when the block
+    ends, removed if it raises: a reader never sees half a file."""
+    tmp = temp_sibling(path)
+    try:
+        yield tmp
+        with open(tmp, "rb+") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write `data` to `path` through `atomic_file`: whole or not at all, with the umask's mode."""
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def write_json(path: Path, obj: Any) -> None:

@@ -41,6 +41,9 @@ CHOICES = "choices"
 _NONE = ("none", "null")
 _TRUE, _FALSE = ("true", "1", "yes"), ("false", "0", "no")
 _SENTENCE_END = re.compile(r"(?<=[.!?])\s+(?=[A-Z`])")
+# A tool's directive in a comment (mypy's "type: ignore[...]", ruff's "noqa", coverage's "pragma", ...),
+# alone or after the help text on its line: it is for the tool, never part of a flag's help.
+_DIRECTIVE = re.compile(r"(?:^|\s*#\s*)(?:type:|noqa\b|pragma:|pyright:|mypy:|fmt:|isort:|ruff:).*$")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,7 +208,9 @@ def field_help(cls: type) -> dict[str, str]:
     for tok in tokenize.generate_tokens(io.StringIO(source).readline):
         if tok.type == tokenize.COMMENT:
             whole = not tok.line[: tok.start[1]].strip()
-            comments[tok.start[0]] = (tok.string.lstrip("#").strip(), whole)
+            text = _DIRECTIVE.sub("", tok.string.lstrip("#").strip()).strip()
+            if text:
+                comments[tok.start[0]] = (text, whole)
     body = next(n for n in ast.parse(source).body if isinstance(n, ast.ClassDef)).body
     sentences = _SENTENCE_END.split(" ".join((inspect.getdoc(cls) or "").split()))
     out = {}

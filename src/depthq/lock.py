@@ -64,7 +64,7 @@ def exclusive(path: Path, flag: str = "--out", verb: str = "") -> Iterator[None]
     made = [p for p in (lock.parent, *lock.parent.parents) if not p.exists()]  # removed if left empty
     lock.parent.mkdir(parents=True, exist_ok=True)
     while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

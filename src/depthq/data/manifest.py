@@ -42,8 +42,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
@@ -51,6 +49,7 @@ from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, 
 from depthq.data.samples import MIN_FRAMES, usable
 from depthq.errors import ConfigError, DataError
 from depthq.lock import writer
+from depthq.progress import Bar
 from depthq.sim.canyon import PAPER
 from depthq.sim.look import upgrade_world
 
@@ -341,7 +340,7 @@ class Dataset:
         """Read every run in full; one message per missing, extra, truncated, corrupted or odd file, and
         one if the folder holds fewer runs than its config asks for (`incomplete`)."""
         problems = [problem] if (problem := self.incomplete()) else []
-        for entry in tqdm(self.entries(), desc="verify", unit="run", disable=not progress):
+        for entry in Bar(self.entries(), desc="verify", unit="run", disable=not progress):
             try:
                 self.read_run(entry)
             except DataError as err:

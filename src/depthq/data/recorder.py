@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from depthq.configio import check_seed, to_dict
 from depthq.control.ou import OUConfig, OUPolicy
@@ -30,8 +29,10 @@ from depthq.data import StorageConfig
 from depthq.data.manifest import Dataset, run_path
 from depthq.data.run import SPLITS, Run, RunMeta
 from depthq.data.runfile import FileInfo, write_run
+from depthq.data.samples import usable
 from depthq.errors import ConfigError
 from depthq.parallel import LOCAL, Executor
+from depthq.progress import Bar
 from depthq.sim.canyon import PAPER, CanyonId
 from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import look_images
@@ -190,7 +191,7 @@ def collect(
     dataset = Dataset.create(Path(out).resolve(), config.recorded(), config.seed, overwrite=overwrite,
                              look_images=look_images(config.env.world.look))
     wanted = {"train": config.runs, "val": config.val_runs}
-    bar = tqdm(
+    bar = Bar(
         total=sum(wanted.values()), desc="collect", unit="run", disable=not progress, dynamic_ncols=True
     )
     steps, start = 0, time.perf_counter()
@@ -201,7 +202,7 @@ def collect(
             for meta, info in _run_all(todo, config, config.seed, dataset, workers, executor):
                 dataset.add(meta, info)
                 steps += meta.n_frames
-                bar.update(1)
+                bar.update(usable(meta, config.data.min_frames))  # usable runs only, as `todo` counts
                 bar.set_postfix(steps_per_s=f"{steps / (time.perf_counter() - start):.0f}")
     finally:
         bar.close()

@@ -57,13 +57,13 @@ from PIL import Image, UnidentifiedImageError
 from rosbags import rosbag1, rosbag2
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
-from tqdm import tqdm
 
-from depthq.configio import to_dict
+from depthq.configio import to_dict, umask
 from depthq.data.manifest import Dataset
 from depthq.data.run import Run, RunMeta
 from depthq.data.runfile import JPEG_QUALITY
 from depthq.errors import ConfigError, DataError
+from depthq.progress import Bar
 from depthq.sim.sensors import N_RAYS, BinConfig, LidarConfig, depth_bins
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)  # the TurtleBot3's distribution; these messages never changed
@@ -157,7 +157,7 @@ def export_bag(data: Path, out: Path, bag_format: str = FORMATS[0], progress: bo
                 for topic, msgtype in zip(astuple(Topics()), types, strict=True)
             ]
             start_ns = EPOCH_S * 1_000_000_000
-            for entry in tqdm(dataset.entries(), desc="bag export", unit="run", disable=not progress):
+            for entry in Bar(dataset.entries(), desc="bag export", unit="run", disable=not progress):
                 with dataset.reader(entry) as reader:
                     run = reader.run(images=False)
                     for t in range(run.n_frames):
@@ -300,11 +300,12 @@ def import_bag(bag: Path, out: Path, config: ImportConfig = ImportConfig(), prog
         for stale in out.parent.glob(f".{out.name}.*.tmp"):  # a killed import's (its --out is locked)
             shutil.rmtree(stale, ignore_errors=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+        staging.chmod(0o777 & ~umask())  # the dataset's folder: as `mkdir` would make it, not mkdtemp's 0o700
         try:
             record = {"source": rec.source, "bag": bag.name, **to_dict(config)}
             dataset = Dataset.create(staging, record, seed=0)
             n_val = int(config.val_runs)
-            bar = tqdm(total=len(cuts), desc="bag import", unit="run", disable=not progress)
+            bar = Bar(total=len(cuts), desc="bag import", unit="run", disable=not progress)
             for position, (first, last, images) in enumerate(_runs_with_images(rec, conns, cuts)):
                 is_val = position >= len(cuts) - n_val
                 index = position - (len(cuts) - n_val) if is_val else position

@@ -24,8 +24,6 @@ without it is written byte for byte as before, and a reader that knows nothing o
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -34,6 +32,7 @@ import numpy as np
 from PIL import Image
 
 from depthq.checksum import file_sha256
+from depthq.configio import atomic_file
 from depthq.data.camera_labels import LABELS_VERSION, CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.errors import DataError
@@ -108,11 +107,7 @@ def write_labelled(path: Path, source: RunReader, labels: CameraLabels | None) -
 def _write(
     path: Path, run: Run, frames: list[bytes], image_shape: tuple[int, ...], jpeg_quality: int
 ) -> FileInfo:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
+    with atomic_file(path) as tmp:
         offsets = np.zeros(len(frames) + 1, dtype=np.int64)
         np.cumsum([len(frame) for frame in frames], out=offsets[1:])
         with h5py.File(tmp, "w") as f:
@@ -131,13 +126,7 @@ def _write(
                 camera.attrs["labels_version"] = LABELS_VERSION
                 camera.attrs["labeller"] = run.camera.labeller
                 camera.attrs["labeller_fingerprint"] = run.camera.fingerprint
-        with open(tmp, "rb+") as f:
-            os.fsync(f.fileno())
         info = FileInfo(sha256=file_sha256(tmp), bytes=tmp.stat().st_size)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return info
 
 

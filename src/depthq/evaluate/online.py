@@ -18,7 +18,6 @@ from typing import Any, Literal
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from depthq.configio import (
     OMIT_DEFAULT,
@@ -51,6 +50,7 @@ from depthq.parallel import LOCAL, Executor
 from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.registry import make_policy
 from depthq.policies.spec import PolicySpec
+from depthq.progress import Bar
 from depthq.sim.canyon import (
     FAMILIES,
     FRESH,
@@ -293,7 +293,7 @@ def drive_canyons(
     runs: dict[int, dict[str, Any]] = {}
     policy_spec = PolicySpec.parse(policy_spec)
     make_worker = partial(_EvalWorker, policy_spec, config, device, video)
-    with tqdm(
+    with Bar(
         total=len(config.canyons),
         desc=f"evaluate {policy_spec.name}",
         unit="canyon",

@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from depthq.data.recorder import CollectConfig, collect, collect_run, exploration_env
 from depthq.data.samples import HORIZON, MIN_FRAMES
@@ -33,6 +32,7 @@ from depthq.evaluate.figures import plot_agreement
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
 from depthq.parallel import worker_context
+from depthq.progress import Bar
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
 from depthq.train.trainer import train
@@ -91,7 +91,7 @@ def small_dqn(
 def _parallel(fn, args_list: list[tuple]) -> list:
     with ProcessPoolExecutor(max_workers=2, mp_context=worker_context()) as pool:
         futures = [pool.submit(fn, *args) for args in args_list]
-        return [f.result() for f in tqdm(futures, desc=fn.__name__, unit="task")]
+        return [f.result() for f in Bar(futures, desc=fn.__name__, unit="task")]
 
 
 def probe(

@@ -10,7 +10,6 @@ ships in its wheel.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from depthq.configio import temp_sibling
 from depthq.evaluate.figures import ACTION_NAMES, DEPTH_PLOT, bin_bearings, value_plot
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.topdown import draw_run
@@ -78,8 +78,7 @@ def write_video(
     background = fig.canvas.copy_from_bbox(fig.bbox)
 
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".mp4", dir=path.parent)
-    os.close(fd)
+    tmp = temp_sibling(path, ".mp4")
     writer = imageio_ffmpeg.write_frames(
         tmp,
         SIZE_PX,

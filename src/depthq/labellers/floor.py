@@ -24,12 +24,12 @@ import torch
 import torch.nn.functional as F
 from PIL import Image, ImageDraw
 from torch import nn
-from tqdm import tqdm
 
 from depthq.configio import from_dict, to_dict
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
 from depthq.errors import DataError
+from depthq.progress import Bar
 from depthq.sim.mjcf import CameraConfig, RobotConfig
 from depthq.sim.sensors import N_RAYS, BinConfig, depth_bins
 
@@ -290,7 +290,7 @@ def _pool(dataset: Dataset, entries: list[RunEntry], geo: Geometry, config: Any,
     """Reduced frames (F, 3, rows, cols) float16 and their footprint masks (F, rows, cols) of up to
     `config.pool_frames` random frames of each run whose future footprint is in view."""
     images, masks = [], []
-    for entry in tqdm(entries, desc="floor pool", unit="run", disable=not progress):
+    for entry in Bar(entries, desc="floor pool", unit="run", disable=not progress):
         run = dataset.read_run(entry, images=True)
         n = len(run.poses) - 1
         for t in rng.choice(n, size=min(config.pool_frames, n), replace=False) if n > 0 else ():
@@ -323,7 +323,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
     net = FloorNet(config.width, config.context).to(device)
     optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
     losses = []
-    for _ in tqdm(range(config.steps), desc="train floor", unit="step", disable=not progress):
+    for _ in Bar(range(config.steps), desc="train floor", unit="step", disable=not progress):
         idx = rng.choice(len(train_pool[0]), size=config.batch_size)
         loss = _loss(net, train_pool[0][idx], train_pool[1][idx], above, device)
         optimizer.zero_grad(set_to_none=True)

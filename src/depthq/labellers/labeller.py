@@ -34,7 +34,6 @@ from typing import Any, Literal
 import numpy as np
 import torch
 from torch import nn
-from tqdm import tqdm
 
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import (
@@ -58,6 +57,7 @@ from depthq.nets.losses import DEPTH_CLIP
 from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
+from depthq.progress import Bar
 from depthq.sim.sensors import BinConfig
 from depthq.train.features import BATCH, FeatureTable, load_features
 
@@ -273,7 +273,7 @@ def _train_perception(dataset: Dataset, config: LabellerConfig, progress: bool, 
     optimizer = make_optimizer(net, config.lr, weight_decay=0.0)
     rng = np.random.default_rng(config.seed)
     losses = []
-    for _ in tqdm(range(config.steps), desc="train labeller", unit="step", disable=not progress):
+    for _ in Bar(range(config.steps), desc="train labeller", unit="step", disable=not progress):
         idx = torch.from_numpy(run_then_frame(train[2], config.batch_size, rng))
         loss = (net(features["train"][idx].to(device)) - train[1][idx].to(device)).abs().mean()
         optimizer.zero_grad(set_to_none=True)
@@ -414,7 +414,7 @@ def label_dataset(dataset: Dataset, labeller: Labeller, replace: bool = False, p
             )
         else:
             pending.append((entry.split, entry.index))
-    for key in tqdm(pending, desc="label", unit="run", disable=not progress):
+    for key in Bar(pending, desc="label", unit="run", disable=not progress):
         entry = dataset.entry(*key)  # as adopted, if it was
         with dataset.reader(entry) as reader:
             labels = labeller.label(reader)

@@ -33,11 +33,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
-from tqdm import tqdm
 
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import DataError
 from depthq.labellers.floor import BATCH, Geometry, ReadingsEstimate, reduce
+from depthq.progress import Bar
 
 # The depth net's channels per level, in multiples of its width: its encoder halves the frame's size at
 # each level, and each decoder level gives a disparity, at 1, 1/2, 1/4, 1/8 of the size (Monodepth2's).
@@ -211,7 +211,7 @@ def _pool(dataset: Dataset, entries: list[RunEntry], geo: Geometry, config: Any,
     `source_from_target` (F, 2, 4, 4) of up to `config.pool_frames` random frames t of each run whose
     camera moved from both neighbours."""
     triplets, transforms = [], []
-    for entry in tqdm(entries, desc="monodepth pool", unit="run", disable=not progress):
+    for entry in Bar(entries, desc="monodepth pool", unit="run", disable=not progress):
         run = dataset.read_run(entry, images=True)
         cameras = camera_poses(run.poses, geo)[:, :3, 3]
         step = np.linalg.norm(np.diff(cameras, axis=0), axis=1)
@@ -241,7 +241,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
 
     optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
     losses = []
-    for _ in tqdm(range(config.steps), desc="train monodepth", unit="step", disable=not progress):
+    for _ in Bar(range(config.steps), desc="train monodepth", unit="step", disable=not progress):
         value = batch_loss(train_pool, rng.choice(len(train_pool[0]), size=config.batch_size))
         optimizer.zero_grad(set_to_none=True)
         value.backward()

@@ -38,7 +38,7 @@ def _training(**changes: Any) -> tuple[tuple[str, Any], ...]:
 
 
 PRESETS: dict[str, Sweep] = {
-    # A few minutes end to end; the test suite runs it.
+    # Under a minute end to end (`depthq.pipeline.preset_times`); the test suite runs it.
     "smoke": Sweep(
         "smoke",
         collect=CollectConfig(runs=6, val_runs=2, max_steps=60),
@@ -49,7 +49,7 @@ PRESETS: dict[str, Sweep] = {
         evaluate=(("time_limit_s", 5.0),),
         nets=NETS,
     ),
-    # Same pipeline, fewer sizes and seeds: under 45 minutes on 2 CPU cores.
+    # Same pipeline, fewer sizes and seeds.
     "quick": Sweep(
         "quick",
         collect=CollectConfig(runs=200, val_runs=20, max_steps=600),

@@ -26,8 +26,6 @@ from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
-from tqdm import tqdm
-
 from depthq.configio import atomic_write_bytes, provenance, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
@@ -40,6 +38,7 @@ from depthq.nets.trunk import TRUNKS
 from depthq.networks import get_network
 from depthq.parallel import LOCAL, Executor, Job
 from depthq.pipeline.sweep import Sweep
+from depthq.progress import Bar
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
 from depthq.train.folder import saved_epoch, settings_differing
@@ -209,7 +208,7 @@ def run_stages(
     times: dict[str, float] = read_json(times_path) if times_path.is_file() else {}
     stages = build_stages(sweep, out, where, executor)
     todo = [stage.job for stage in stages if not stage.done()]
-    with tqdm(
+    with Bar(
         total=len(stages),
         initial=len(stages) - len(todo),
         desc=sweep.name,

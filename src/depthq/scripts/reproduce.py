@@ -7,11 +7,13 @@ from pathlib import Path
 
 from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
+from depthq.pipeline.preset_times import DEFAULT_PRESET, DURATIONS, presets_help
 from depthq.scripts.sweep import DRY_RUN_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="quick", help="smoke (≈ 5 min), quick (≤ 45 min) or paper (≤ 3 h)")
+    p.add_argument("--preset", default=DEFAULT_PRESET, metavar="{" + ",".join(DURATIONS) + "}",
+                   help=presets_help())
     p.add_argument("--out", type=Path, required=True, help="output folder (resumed when run again)")
     p.add_argument("--dry-run", action="store_true", help=DRY_RUN_HELP)
     p.add_argument("--device", default="auto", help=DEVICE_HELP)

@@ -120,8 +120,14 @@ def bank(look: str) -> TextureBank:
         return HELDOUT_BANK
     if look in (FLAT, COLOURS, BROAD):
         raise ConfigError(f"look {look!r} has no texture bank")
+    if Path(look).is_file():
+        raise ConfigError(f"look {look!r} is a file; a look is one of {LOOKS} or a folder of images")
+    if not Path(look).is_dir() and ("/" in look or look.startswith(("~", "."))):
+        raise ConfigError(f"look {look!r}: the folder {look} does not exist; name a folder of images or "
+                          f"one of the looks {LOOKS}")
     if not Path(look).is_dir():
-        raise ConfigError(f"unknown look {look!r}; expected one of {LOOKS} or a folder of images")
+        raise ConfigError(f"unknown look {look!r}; expected one of {LOOKS} or a folder of images (no "
+                          f"folder {look} exists here)")
     return folder_bank(look)
 
 

@@ -37,7 +37,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from depthq.checksum import file_sha256
 from depthq.configio import provenance, read_json, write_json
@@ -46,6 +45,7 @@ from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
 from depthq.nets.trunk import Trunk, build_trunk, preprocess, trunk_spec
 from depthq.parallel import cores
+from depthq.progress import Bar
 
 FEATURES = "features"
 ARRAY = "features.f16.npy"
@@ -126,7 +126,7 @@ def compute_features(
     start = time.perf_counter()
     try:
         out = np.lib.format.open_memmap(tmp, mode="w+", dtype=np.float16, shape=(n_frames, trunk.feature_dim))
-        bar = tqdm(total=n_frames, desc=f"features {trunk.name} {size}px", unit="frame", disable=not progress)
+        bar = Bar(total=n_frames, desc=f"features {trunk.name} {size}px", unit="frame", disable=not progress)
         row = 0
         with torch.inference_mode():
             for batch in prefetch(frame_batches(dataset, size, index.get("mirrored", False)), depth=2):

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from depthq.data.views import FrameView, run_then_frame
 from depthq.nets.heads import QNet
 from depthq.nets.losses import DEPTH_CLIP
 from depthq.nets.trunk import resize_frames, scale_frames
+from depthq.progress import Bar
 from depthq.train.features import FeatureTable
 
 
@@ -133,7 +133,7 @@ class ImageSamples(Samples):
         super().__init__(view.arrays)
         self.frames = torch.empty((len(view), 3, size, size), dtype=torch.uint8)
         chunk = 256
-        for start in tqdm(range(0, len(view), chunk), desc="decode frames", unit="chunk",
+        for start in Bar(range(0, len(view), chunk), desc="decode frames", unit="chunk",
                           disable=not progress):
             stop = min(start + chunk, len(view))
             self.frames[start:stop] = resize_frames(np.stack([view[i][0] for i in range(start, stop)]), size)

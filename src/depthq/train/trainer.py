@@ -16,7 +16,6 @@ import torch
 from torch.optim import Optimizer
 from torch.optim.swa_utils import AveragedModel
 from torch.utils.tensorboard import SummaryWriter
-from tqdm import tqdm
 
 from depthq.data.manifest import Dataset
 from depthq.data.views import FrameView
@@ -28,6 +27,7 @@ from depthq.nets.optim import make_optimizer
 from depthq.nets.trunk import TRUNKS
 from depthq.networks import get_network
 from depthq.parallel import cores
+from depthq.progress import Bar
 from depthq.train import folder
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
@@ -85,7 +85,7 @@ def train(
 
     target_head = None  # a bootstrapped target's network Q̄: the previous epoch's head, from epoch 2 on
     tb = SummaryWriter(out / "tb", purge_step=state.epoch + 1)
-    bar = tqdm(total=config.epochs, initial=state.epoch, desc=f"train {config.model}", unit="epoch",
+    bar = Bar(total=config.epochs, initial=state.epoch, desc=f"train {config.model}", unit="epoch",
                disable=not progress)
     try:
         for epoch in range(state.epoch + 1, config.epochs + 1):
@@ -202,7 +202,7 @@ def _samples(
         return (FeatureSamples(arrays["train"], table, "train", following, mirrored),
                 FeatureSamples(arrays["val"], table, "val", following))
     if progress:
-        tqdm.write(f"trunk {config.trunk!r} is trained with the head, on images")
+        Bar.write(f"trunk {config.trunk!r} is trained with the head, on images")
     return (ImageSamples(FrameView(dataset, "train", arrays["train"]), config.input_size, progress),
             ImageSamples(FrameView(dataset, "val", arrays["val"]), config.input_size, progress))
 
