@@ -60,7 +60,7 @@ class RenderTask:
 
 
 def render_seeds(seed: int, look: str, split: str, index: int) -> tuple[int, int]:
-    """(appearance seed, frame-stream seed) of source run `index` of `split` rendered in `look` from `seed`."""
+    """(appearance seed, frame-stream seed) of run `index` of `split` rendered in `look` from `seed`."""
     ss = np.random.SeedSequence([seed, zlib.crc32(look.encode())], spawn_key=(SPLITS.index(split), index))
     appearance, frames = ss.generate_state(2, np.uint64)
     return int(appearance), int(frames)
@@ -212,15 +212,15 @@ def verify_rendered(dataset: Dataset) -> list[str]:
         path = dataset.path(entry)
         v, source_index = divmod(entry.index, STRIDE)
         if v < 1 or source_index != origin.source:
-            problems.append(f"{path}: index {entry.index} is not a re-render of run {origin.source} (that run's "
-                            f"index plus a multiple of {STRIDE})")
+            problems.append(f"{path}: index {entry.index} is not a re-render of run {origin.source} (that "
+                            f"run's index plus a multiple of {STRIDE})")
             continue
         if looks.setdefault(v, (origin.look, origin.seed)) != (origin.look, origin.seed):
             problems.append(f"{path}: look {origin.look!r} seed {origin.seed}, but the other runs of "
                             f"re-rendered look {v} have look {looks[v][0]!r} seed {looks[v][1]}")
         if not dataset.has(entry.split, origin.source) or dataset.entry(entry.split, origin.source).rendered:
-            problems.append(f"{path}: its source, run {origin.source} of {entry.split}, is not a collected run "
-                            "of the manifest")
+            problems.append(f"{path}: its source, run {origin.source} of {entry.split}, is not a collected "
+                            "run of the manifest")
             continue
         source = dataset.entry(entry.split, origin.source)
         try:
@@ -234,6 +234,7 @@ def verify_rendered(dataset: Dataset) -> list[str]:
         differing += [name for name in _ARRAYS if getattr(a, name).tobytes() != getattr(b, name).tobytes()]
         differing += ["image_shape"] if shapes[0] != shapes[1] else []
         if differing:
-            problems.append(f"{path}: differs from its source {dataset.path(source)} in {', '.join(differing)}; "
-                            "a re-rendered run keeps its source's poses, LiDAR, bins, actions and end")
+            problems.append(f"{path}: differs from its source {dataset.path(source)} in "
+                            f"{', '.join(differing)}; a re-rendered run keeps its source's poses, LiDAR, bins, "
+                            "actions and end")
     return problems

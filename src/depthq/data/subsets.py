@@ -42,7 +42,8 @@ def select_runs(dataset: Dataset, split: str, n_runs: int | None, min_frames: in
         collected = sum(entry.rendered is None for entry in dataset.entries(split))
         raise ConfigError(
             f"subset of n_runs={n_runs} {split} runs requested, but {dataset.root} has only "
-            f"{len(runs)} usable {split} runs (of {collected} collected; runs under {min_frames} frames are left out)"
+            f"{len(runs)} usable {split} runs (of {collected} collected; runs under {min_frames} frames are "
+            "left out)"
         )
     return with_renders(dataset, split, runs[:n_runs])
 
@@ -50,4 +51,5 @@ def select_runs(dataset: Dataset, split: str, n_runs: int | None, min_frames: in
 def with_renders(dataset: Dataset, split: str, runs: list[RunEntry]) -> list[RunEntry]:
     """`runs` and, after them, every re-render of one of them in another look, in index order."""
     chosen = {entry.index for entry in runs}
-    return runs + [e for e in dataset.entries(split) if e.rendered is not None and e.rendered.source in chosen]
+    return runs + [entry for entry in dataset.entries(split)
+                   if entry.rendered is not None and entry.rendered.source in chosen]

@@ -27,16 +27,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                 "every feature cache against its checksum")
     verify.add_argument("dir", type=Path, help="dataset folder")
     again = actions.add_parser(
-        "rerender", help="add every collected run rendered again in other looks: the same poses, LiDAR, bins, "
-        "actions and end, new frames (and, in the textured looks, a new canyon appearance and camera), one run "
-        "each in the same split (docs/formats.md#re-rendered-runs); resumed when stopped")
+        "rerender", help="add every collected run rendered again in other looks: the same poses, LiDAR, "
+        "bins, actions and end, new frames (and, in the textured looks, a new canyon appearance and camera), "
+        "one run each in the same split (docs/formats.md#re-rendered-runs); resumed when stopped")
     again.add_argument("dir", type=Path, help="dataset folder")
     again.add_argument("--looks", required=True,
-                       help="looks, comma-separated: flat, colours, textured, heldout, broad or folders of images "
-                       "(docs/design.md#looks), e.g. broad,textured")
+                       help="looks, comma-separated: flat, colours, textured, heldout, broad or folders of "
+                       "images (docs/design.md#looks), e.g. broad,textured")
     again.add_argument("--seed", type=int, default=1,
-                       help="which draw of each look's canyon appearance, pixel noise and camera: another seed "
-                       "adds another draw [%(default)s]")
+                       help="which draw of each look's canyon appearance, pixel noise and camera: another "
+                       "seed adds another draw [%(default)s]")
     again.add_argument("--workers", type=int, default=2, help="parallel worker processes [%(default)s]")
     add_executor_arguments(again)
     again.set_defaults(_writes=("dir",))  # the dataset it adds to: locked while it does
