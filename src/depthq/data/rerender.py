@@ -235,6 +235,6 @@ def verify_rendered(dataset: Dataset) -> list[str]:
         differing += ["image_shape"] if shapes[0] != shapes[1] else []
         if differing:
             problems.append(f"{path}: differs from its source {dataset.path(source)} in "
-                            f"{', '.join(differing)}; a re-rendered run keeps its source's poses, LiDAR, bins, "
-                            "actions and end")
+                            f"{', '.join(differing)}; a re-rendered run keeps its source's poses, LiDAR, "
+                            "bins, actions and end")
     return problems
