@@ -11,10 +11,11 @@ step are those of the step's start, so the collector's camera and LiDAR saw from
 recorded pose: the robot is set there and driven that step at the recorded command. Then the LiDAR is
 cast and the frame rendered, their noise and the robot camera's (`depthq.sim.camera_model`: exposure,
 white balance, blur from the recorded yaw rate) drawn from one stream in the collector's order. The
-frames a run skipped (`CollectConfig.skip_frames`) are not stored: the camera meters them on poses
-between the spawn point and the first stored one, and the first stored frame takes the command after it
-as the one before it. So a run rendered in its own look with its own seeds is its recorded run, as close
-as its float32 poses allow (tests/test_rerender.py).
+frames a run skipped (`CollectConfig.skip_frames`) are not stored, but the camera metered them: they are
+driven again from the spawn point with the run's exploration commands (its OU seed), and where that does
+not land on the first stored pose, rendered on the way there, the first stored frame taking the command
+after it as the one before it. So a run rendered in its own look with its own seeds is its recorded run,
+as close as its float32 poses allow (tests/test_rerender.py).
 
 The dataset's v-th re-rendered look (v = 1, 2, ...: a look and a seed) holds run v × STRIDE + i of the
 split for source run i (`runs/train_1000012.h5`). Its canyon's appearance and its frames' noise and
@@ -35,6 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from depthq.configio import check_seed, from_dict
+from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data.manifest import Dataset, Rendering, RunEntry, run_path
 from depthq.data.run import SPLITS, Run, RunMeta, meta_fields
 from depthq.data.runfile import FileInfo, RunReader, write_run
@@ -46,6 +48,7 @@ from depthq.sim.look import check_look
 from depthq.sim.world import CanyonWorld, WorldConfig
 
 STRIDE = 1_000_000  # run indices per look: a collection's own stay below it
+POSE_TOLERANCE = 1e-4  # m and rad: a pose driven again is the recorded one (float32) within this
 _ARRAYS = ("scans", "bins", "actions", "poses", "times")  # what a re-render copies from its source
 
 
@@ -67,35 +70,56 @@ def render_seeds(seed: int, look: str, split: str, index: int) -> tuple[int, int
 
 
 def render_frames(world: CanyonWorld, run: Run, canyon: Canyon, appearance: np.random.Generator,
-                  frames: np.random.Generator) -> np.ndarray:
+                  frames: np.random.Generator, ou: OUConfig | None) -> np.ndarray:
     """`run`'s frames rendered again at its recorded poses in `world`'s look, uint8 (N, H, W, 3): `canyon`
     built with `appearance`, the pixel noise and the run's camera drawn from `frames` as the collector's
-    env drew them (its `np_random`)."""
+    env drew them (its `np_random`); `ou`: the exploration policy that drove it (None: unknown)."""
     world.load(canyon, appearance)
+    skipped = round(float(run.times[0]) / world.config.period)
+    commands = skipped_commands(world, run, ou, skipped)
     world.place(*SPAWN)
     world.start_run(frames)
-    skipped = round(float(run.times[0]) / world.config.period)
     start, first = np.array(SPAWN), run.poses[0].astype(np.float64)
-    for k in range(skipped):  # not stored: the camera meters them on the way to the first stored pose
-        world.place(*(start + k / skipped * (first - start)))
+    for k in range(skipped):  # not stored, but metered by the camera
+        if commands is None:
+            world.place(*(start + k / skipped * (first - start)))
+        elif k:
+            world.advance(commands[k - 1])
         world.scan(frames)
         world.image(frames)
+    before_first = commands[-1] if commands else run.actions[0]
     images = []
     for t in range(run.n_frames):
-        _sensor_state(world, run, t)
+        _sensor_state(world, run, t, before_first)
         world.scan(frames)  # the LiDAR's noise draws come before the frame's, as in the collector
         images.append(world.image(frames))
     return np.stack(images)
 
 
-def _sensor_state(world: CanyonWorld, run: Run, t: int) -> None:
+def skipped_commands(world: CanyonWorld, run: Run, ou: OUConfig | None, skipped: int) -> list[float] | None:
+    """The commands the collector drove the `skipped` frames before the first stored one with, drawn
+    from the run's exploration policy (`ou`, the run's policy seed), if driving them from the spawn point
+    lands on the first stored pose; else None."""
+    if ou is None or skipped == 0:
+        return None
+    policy, limit = OUPolicy(ou, seed=run.meta.policy_seed), world.config.max_yaw_rate
+    # as the collector sends them: clipped to the robot's limit, then float32 (`collect_run`)
+    commands = [float(np.float32(np.clip(policy.act(None), -limit, limit))) for _ in range(skipped)]
+    world.place(*SPAWN)
+    for command in commands:
+        world.advance(command)
+    return commands if np.allclose(world.pose, run.poses[0], rtol=0, atol=POSE_TOLERANCE) else None
+
+
+def _sensor_state(world: CanyonWorld, run: Run, t: int, before_first: float) -> None:
     """The robot as the collector's sensors saw it at frame t: at rest at the spawn point (time 0), or
-    one physics step before the recorded pose, driven that step at the command before frame t."""
+    one physics step before the recorded pose, driven that step at the command before frame t (before
+    frame 0: `before_first`)."""
     if run.times[t] == 0:
         world.place(*SPAWN)
         return
     config = world.config
-    command = run.actions[t - 1] if t else run.actions[0]  # frame 0's own: the one before was skipped
+    command = run.actions[t - 1] if t else before_first
     yaw_rate = float(command) if np.isfinite(command) else 0.0
     x, y, yaw = run.poses[t].astype(np.float64)
     dt, before = config.physics_dt, yaw - config.physics_dt * yaw_rate
@@ -120,8 +144,8 @@ class _RenderWorker:
     """One world rendering run after run (a worker of `depthq.parallel`), rebuilt when the look changes;
     only the parent writes the manifest."""
 
-    def __init__(self, root: str, world: WorldConfig) -> None:
-        self.root, self.base = Path(root), world
+    def __init__(self, root: str, world: WorldConfig, ou: OUConfig | None) -> None:
+        self.root, self.base, self.ou = Path(root), world, ou
         self.world: CanyonWorld | None = None
 
     def __call__(self, task: RenderTask) -> tuple[RunMeta, FileInfo]:
@@ -138,7 +162,7 @@ class _RenderWorker:
                             f"{canyon_id} has another: it cannot be rendered again")
         appearance, frames = render_seeds(task.seed, task.look, source.split, source.index)
         images = render_frames(self.world, run, generate_canyon(canyon_id, config.canyon),
-                               np.random.default_rng(appearance), np.random.default_rng(frames))
+                               np.random.default_rng(appearance), np.random.default_rng(frames), self.ou)
         meta = replace(run.meta, index=task.index)
         out = Run(meta=meta, images=images, **{name: getattr(run, name) for name in _ARRAYS})
         return meta, write_run(run_path(self.root, source.split, task.index), out, quality)
@@ -167,6 +191,7 @@ def rerender(root: Path, looks: tuple[str, ...], seed: int = 1, workers: int = 1
     executor.check_shared(root)  # workers write the run files themselves
     opened = Dataset.open(root)
     env = dataset_env(opened)
+    ou = from_dict(OUConfig, opened.config["ou"]) if "ou" in opened.config else None
     dataset = Dataset.create(opened.root.resolve(), opened.config, opened.seed)  # a resume: stray files go
     sources = [e for e in dataset.entries() if e.rendered is None]
     if any(e.index >= STRIDE for e in sources):
@@ -180,15 +205,15 @@ def rerender(root: Path, looks: tuple[str, ...], seed: int = 1, workers: int = 1
     origin = {(t.source.split, t.index): Rendering(t.source.index, t.look, t.seed) for t in todo}
     frames = sum(t.source.n_frames for t in todo)
     with tqdm(total=frames, desc="rerender", unit="frame", disable=not progress, dynamic_ncols=True) as bar:
-        for meta, info in _render_all(todo, dataset.root, env.world, workers, executor):
+        for meta, info in _render_all(todo, partial(_RenderWorker, str(dataset.root), env.world, ou), workers,
+                                      executor):
             dataset.add(meta, info, origin[(meta.split, meta.index)])
             bar.update(meta.n_frames)
     return dataset
 
 
-def _render_all(todo: list[RenderTask], root: Path, world: WorldConfig, workers: int, executor: Executor
+def _render_all(todo: list[RenderTask], make_worker: partial, workers: int, executor: Executor
                 ) -> Iterator[tuple[RunMeta, FileInfo]]:
-    make_worker = partial(_RenderWorker, str(root), world)
     if workers == 1 and executor.kind == "local":  # in this process: no worker to start
         worker = make_worker()
         try:
