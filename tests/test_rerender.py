@@ -265,3 +265,34 @@ def test_bad_input_is_refused_and_writes_nothing(tiny: Path, tmp_path: Path,
 
 def _files(root: Path) -> list[str]:
     return sorted(path.name for path in (root / "runs").iterdir())
+
+
+@pytest.mark.slow  # a toy labeller's training and a labelling (~20 s)
+def test_every_look_of_a_run_is_labelled_from_its_own_frames(rendered: Path, small_hard_dataset: Path,
+                                                             tmp_path: Path) -> None:
+    from depthq.labellers.labeller import LabellerConfig, train_labeller
+
+    root = tmp_path / "data"
+    shutil.copytree(rendered, root, ignore=shutil.ignore_patterns("features"))
+    toy = {"method": "perception", "hidden": 64, "steps": 20, "batch_size": 16, "lr": 1.0, "input_size": 64}
+    labeller = train_labeller(LabellerConfig(data=str(small_hard_dataset), **toy), tmp_path / "labeller",
+                              progress=False, device="cpu")  # another family's LiDAR, as `label` asks
+    assert main(["label", str(root), "--from", "camera", "--labeller", str(labeller), "--no-progress"]) == 0
+    dataset = Dataset.open(root)
+    source = usable_runs(dataset, "train", 20)[0]
+    looks = [dataset.read_run(dataset.entry("train", v * STRIDE + source.index), images=False)
+             for v in range(len(LOOKS) + 1)]
+    assert all(run.camera is not None for run in looks)
+    assert looks[0].camera.bins.tobytes() != looks[2].camera.bins.tobytes()  # each look's own frames
+    assert verify_rendered(dataset) == []  # labels are not among what a re-render copies
+    arrays = view_arrays(dataset, "train", 1, "bins", labels="camera")
+    assert set(arrays["run_id"].tolist()) == {v * STRIDE + source.index for v in range(len(LOOKS) + 1)}
+
+
+def test_bench_rerender_prints_each_looks_frames_per_second(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "rerender", "--runs", "1", "--looks", "colours", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    colours = result["looks"]["colours"]
+    assert colours["frames"] == result["collect"]["frames"] > 0 and colours["frames_per_s"] > 0
+    assert colours["kb_per_frame"] > 0
+    assert main(["bench", "rerender", "--looks", "colours,neon"]) == 2
