@@ -19,10 +19,12 @@ from PIL import Image
 from depthq.cli import main
 from depthq.configio import from_dict
 from depthq.control.ou import OUConfig
+from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env, run_seeds
 from depthq.data.rerender import STRIDE, dataset_env, render_frames, verify_rendered
 from depthq.data.runfile import encode_jpeg, write_run
+from depthq.data.stats import dataset_stats, format_stats
 from depthq.data.subsets import select_runs, usable_runs
 from depthq.data.views import view_arrays
 from depthq.sim.canyon import CanyonId, generate_canyon
@@ -225,6 +227,11 @@ def test_training_views_take_n_collected_runs_and_their_looks(rendered: Path) ->
     assert sorted(set(arrays["run_id"].tolist())) == sorted(v * STRIDE + i for v in range(3) for i in val)
     counts = np.diff(arrays["run_offsets"])
     assert (counts == counts[0]).all()  # each look of a run: the same samples
+    stats = dataset_stats(dataset, DataConfig())
+    collected = {split: sum(e.rendered is None for e in dataset.entries(split)) for split in ("train", "val")}
+    assert stats["collected"] == collected and stats["rendered_looks"] == ["colours:1", "textured:1"]
+    assert stats["rendered"] == {split: len(LOOKS) * n for split, n in collected.items()}
+    assert "rendered again in 2 look(s) (colours:1, textured:1)" in format_stats(stats)
 
 
 @pytest.mark.slow  # features of every frame and a toy training (~30 s)
