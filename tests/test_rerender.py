@@ -77,11 +77,14 @@ def _replayed(root: Path) -> list[tuple[list[bytes], np.ndarray, np.ndarray]]:
     return out
 
 
-def test_a_run_rendered_in_its_own_look_is_its_recorded_run(tiny: Path) -> None:
-    """Flat: the JPEG the collector stored, byte for byte, for all but frames whose float32 pose moves a
-    wall's edge by a pixel (none at all to 1 in 100 here), and even those within 0.05 grey levels."""
+@pytest.mark.parametrize("data", ["tiny", "small_hard_dataset"])
+def test_a_run_rendered_in_its_own_look_is_its_recorded_run(data: str, request: pytest.FixtureRequest
+                                                             ) -> None:
+    """Flat (the paper family's) and colours (the hard family's, its pillars): the JPEG the collector
+    stored, byte for byte, for all but frames whose float32 pose moves an edge by a pixel (none to 1 in
+    100 here), and even those within 0.05 grey levels."""
     identical = total = 0
-    for jpegs, _, again in _replayed(tiny):
+    for jpegs, _, again in _replayed(request.getfixturevalue(data)):
         for stored, frame in zip(jpegs, again, strict=True):
             encoded = encode_jpeg(frame, 90)
             identical += encoded == stored
