@@ -188,9 +188,9 @@ def rerender(root: Path, looks: tuple[str, ...], seed: int = 1, workers: int = 1
                           "--seed")
     for look in looks:
         check_look(look)
-    executor.check_shared(root)  # workers write the run files themselves
     opened = Dataset.open(root)
     env = dataset_env(opened)
+    executor.check_shared(root)  # workers write the run files themselves
     ou = from_dict(OUConfig, opened.config["ou"]) if "ou" in opened.config else None
     dataset = Dataset.create(opened.root.resolve(), opened.config, opened.seed)  # a resume: stray files go
     sources = [e for e in dataset.entries() if e.rendered is None]
