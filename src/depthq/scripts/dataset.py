@@ -23,8 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     stats.add_argument("dir", type=Path, help="dataset folder")
     stats.add_argument("--json", action="store_true", help="print JSON instead of a table")
     add_config_arguments(stats, DataConfig)
-    verify = actions.add_parser("verify", help="read every run file and check it against the manifest, and "
-                                "every feature cache against its checksum")
+    verify = actions.add_parser("verify", help="read every run file and check it against the manifest, "
+                                "every re-rendered run against its source and every feature cache against "
+                                "its checksum")
     verify.add_argument("dir", type=Path, help="dataset folder")
     again = actions.add_parser(
         "rerender", help="add every collected run rendered again in other looks: the same poses, LiDAR, "
