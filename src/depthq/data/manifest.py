@@ -26,6 +26,8 @@ manifest.json:
                                 the canyon the run drove in and the exploration policy's seed
                                 ("recorded", its position in the bag, 0, 0 for an imported run)
         sha256, bytes           the file's hash and size, checked before the file is read as data
+        rendered                only in a re-rendered run's row (`depthq dataset rerender`): its source
+                                run's index in the same split, and the look and seed it was drawn in
 
 A run exists once its row is in the manifest: a file without a row (a crash between the two
 writes) is written again on resume. Rows hold no timestamps, so the same seeds give the same bytes.
@@ -38,11 +40,11 @@ import hashlib
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from depthq.configio import from_dict, provenance, read_json, to_dict, write_json
+from depthq.configio import OMIT_DEFAULT, from_dict, provenance, read_json, to_dict, write_json
 from depthq.data.camera_labels import CameraLabels
 from depthq.data.run import Run, RunMeta, meta_fields
 from depthq.data.runfile import JPEG_QUALITY, FileInfo, RunReader, file_sha256, write_labelled, write_run
@@ -64,12 +66,23 @@ _NOT_STORED = ("horizon", "every_run_end", "action_clip", "action_lag", "subsets
 
 
 @dataclass(frozen=True)
+class Rendering:
+    """Where a re-rendered run's frames come from (`depthq.data.rerender`): run `source` of its split,
+    rendered again in `look`, its appearance and camera drawn from `seed`."""
+
+    source: int
+    look: str
+    seed: int
+
+
+@dataclass(frozen=True)
 class RunEntry(RunMeta):
     """A manifest row: a completed run's metadata plus where its file is and how to check it."""
 
     file: str
     sha256: str
     bytes: int
+    rendered: Rendering | None = field(default=None, metadata=OMIT_DEFAULT)  # a re-rendered run's origin
 
     @property
     def info(self) -> FileInfo:
@@ -254,12 +267,14 @@ class Dataset:
     def path(self, entry: RunEntry) -> Path:
         return self.root / entry.file
 
-    def add(self, meta: RunMeta, info: FileInfo) -> RunEntry:
-        """Record a run whose file was written to `run_path` (by `write_run`, maybe in a worker)."""
+    def add(self, meta: RunMeta, info: FileInfo, rendered: Rendering | None = None) -> RunEntry:
+        """Record a run whose file was written to `run_path` (by `write_run`, maybe in a worker);
+        `rendered`: a re-rendered run's origin."""
         path = self.run_path(meta.split, meta.index)
         if not path.is_file() or path.stat().st_size != info.bytes:
             raise DataError(f"{path}: not the {info.bytes}-byte file that was written for run {meta.name}")
-        entry = RunEntry(**to_dict(meta), file=path.relative_to(self.root).as_posix(), **to_dict(info))
+        entry = RunEntry(**to_dict(meta), file=path.relative_to(self.root).as_posix(), **to_dict(info),
+                         rendered=rendered)
         self._runs[(meta.split, meta.index)] = entry
         self._write_manifest()
         return entry

@@ -68,13 +68,16 @@ def dataset_stats(dataset: Dataset, config: DataConfig) -> dict[str, Any]:
     rows.append(subset_stats("val", usable_runs(dataset, "val", config.min_frames), config))
     entries = dataset.entries()
     frames = sum(e.n_frames for e in entries)
+    collected = {split: [e for e in dataset.entries(split) if e.rendered is None] for split in SPLITS}
+    rendered = {split: len(dataset.entries(split)) - len(collected[split]) for split in SPLITS}
+    looks = sorted({f"{e.rendered.look}:{e.rendered.seed}" for e in entries if e.rendered is not None})
     return {
         "dataset": str(dataset.root),
         "data_config": to_dict(config),
-        "collected": {split: len(dataset.entries(split)) for split in SPLITS},
-        "usable": {
-            split: sum(usable(e, config.min_frames) for e in dataset.entries(split)) for split in SPLITS
-        },
+        "collected": {split: len(collected[split]) for split in SPLITS},
+        "usable": {split: sum(usable(e, config.min_frames) for e in collected[split]) for split in SPLITS},
+        # runs rendered again in other looks (`depthq dataset rerender`); the table counts collected runs
+        **({"rendered": rendered, "rendered_looks": looks} if looks else {}),
         "frames": frames,
         "kb_per_frame": sum(e.bytes for e in entries) / 1000 / frames if frames else 0.0,
         "table": [to_dict(row) for row in rows],
@@ -133,6 +136,9 @@ def format_stats(stats: dict[str, Any]) -> str:
     lines = [
         f"{stats['dataset']}: "
         + ", ".join(f"{collected[s]} {s} runs ({usable_counts[s]} usable)" for s in SPLITS)
+        + (f"; {sum(stats['rendered'].values())} runs rendered again in {len(stats['rendered_looks'])} "
+           f"look(s) ({', '.join(stats['rendered_looks'])}), trained on with their sources"
+           if "rendered" in stats else "")
         + f"; {stats['frames']} frames, {stats['kb_per_frame']:.1f} KB per frame stored",
         f"usable = at least {cfg['min_frames']} frames; "
         f"collision targets on the last {cfg['horizon']} samples of "

@@ -24,6 +24,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     col.add_argument("--runs", type=int, default=20, help="runs collected (and stored) per measurement")
     col.add_argument("--workers", type=int, default=2, help="worker processes of the second measurement")
+    again = sub.add_parser("rerender", help="a dataset's runs rendered again in other looks: frames/s with "
+                           "storage (`dataset rerender`), beside the collector's")
+    again.add_argument("--runs", type=int, default=10, help="runs collected, then rendered in each look")
+    again.add_argument("--looks", default="textured,broad",
+                       help="looks measured in turns, comma-separated: names or folders of images")
+    again.add_argument("--workers", type=int, default=1, help="worker processes of both")
     feat = sub.add_parser("features", help="trunk features/s end to end on a dataset's frames (≥ 300)")
     feat.add_argument("--data", type=Path, required=True, help="a dataset folder")
     feat.add_argument("--frames", type=int, default=1024, help="dataset frames put through the trunk")
@@ -80,7 +86,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         parser.add_argument("--look", default=None,
                             help="the look driven in: flat, colours, textured, heldout, broad or a folder of "
                             "images (docs/design.md#looks; default: the canyons' family's own)")
-    for parser in (sim, col, feat, tr, pol, ev, step, dev):
+    for parser in (sim, col, again, feat, tr, pol, ev, step, dev):
         parser.add_argument("--json", action="store_true", help="print the result as one JSON line")
     for parser in (feat, tr, pol, ev, step, dev):
         parser.add_argument("--device", default="auto", help=DEVICE_HELP)
@@ -133,6 +139,20 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
             f"{r['w1']['steps_per_s']} steps/s with 1 worker, {last['steps_per_s']} with {args.workers} "
             f"(×{r.get('speedup', 1.0)}), {last['kb_per_frame']} KB per frame"
         )
+    if args.what == "rerender":
+        _positive("--runs", args.runs)
+        _positive("--workers", args.workers)
+        from depthq.bench.rerender import bench_rerender  # mujoco: off the CLI's startup
+
+        looks = tuple(look.strip() for look in args.looks.split(","))
+        for look in looks:
+            _check_look(look)
+        r = bench_rerender(args.runs, looks, args.workers)
+        each = "; ".join(f"{look}: {e['frames_per_s']} frames/s ({e['ms_per_frame']} ms, "
+                         f"{e['kb_per_frame']} KB per frame)" for look, e in r["looks"].items())
+        c = r["collect"]
+        return r, (f"re-rendered {each}; collected in {c['look']}: {c['frames_per_s']} frames/s "
+                   f"({r['workers']} worker(s))")
     if args.what == "features":
         _positive("--frames", args.frames)
         from depthq.bench.features import bench_features  # torch: off the CLI's startup
