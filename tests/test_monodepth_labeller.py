@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import kornia
@@ -21,6 +22,7 @@ import numpy as np
 import pytest
 import torch
 
+from depthq.checksum import write_checked_json
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.labellers import floor, monodepth
@@ -127,7 +129,62 @@ def test_the_monodepth_labeller_learns_from_real_frames_and_labels_them(small_ha
         assert np.all((held.bins >= 0) & (held.bins <= 2.0))
 
 
-@pytest.mark.parametrize(("setting", "value"), [("min_depth", -0.1), ("max_depth", 0.05), ("smoothness", -1)])
+@pytest.mark.parametrize("brightness", ["gain", "affine"])
+def test_brightness_compensation_recovers_a_known_exposure_and_white_balance(brightness: str) -> None:
+    rng = np.random.default_rng(0)
+    target = torch.from_numpy(rng.uniform(0.1, 0.9, (2, 3, 20, 24)).astype(np.float32))
+    gain = torch.tensor([[0.5, 0.8, 1.6], [1.3, 1.0, 0.7]])[..., None, None]
+    bias = torch.tensor([[0.1, -0.05, 0.02], [0.0, 0.15, -0.1]])[..., None, None]
+    if brightness == "gain":
+        bias = torch.zeros_like(bias)
+    source = (target - bias) / gain  # what a camera of another exposure and white balance gave
+    valid = torch.ones_like(target[:, :1], dtype=torch.bool)
+    valid[:, :, :, :6] = False  # out of the source's view: other content, ignored by the fit
+    source[:, :, :, :6] = torch.from_numpy(rng.uniform(0, 1, (2, 3, 20, 6)).astype(np.float32))
+    fixed = monodepth.compensate(source, target, valid, brightness)
+    assert torch.allclose(fixed[:, :, :, 6:], target[:, :, :, 6:], atol=1e-5)
+    assert not torch.allclose(source[:, :, :, 6:], target[:, :, :, 6:], atol=0.05)
+    assert monodepth.compensate(source, target, valid, "none") is source
+
+
+def test_brightness_compensation_takes_out_an_exposure_change_from_the_loss() -> None:
+    """A triplet whose neighbours are the target itself, taken at other exposures: with the true (no)
+    motion the compensated loss is nil, the uncompensated one is not."""
+    geo = floor.Geometry(WorldConfig().camera, WorldConfig().robot, floor.geometry(None, 2).bins, scale=8)
+    rng = np.random.default_rng(1)
+    target = torch.from_numpy(rng.uniform(0.2, 0.8, (1, 3, *geo.shape)).astype(np.float32))
+    frames = torch.stack([target * 0.6, target, target * 1.2 + 0.05], dim=1)
+    transforms = torch.eye(4).expand(1, 2, 4, 4)
+    camera = monodepth.intrinsics(geo)[None]
+    net = monodepth.DepthNet(4)
+
+    def loss(brightness: str) -> float:
+        return monodepth.loss(net, frames, transforms, camera, (0.1, 10.0), 0.0, brightness).item()
+
+    assert loss("affine") < 1e-3 < 0.02 < loss("none")
+
+
+@pytest.mark.slow  # a few toy steps with brightness compensation on real frames: ~5 s
+def test_a_labeller_learns_with_brightness_compensation_and_records_it(small_hard_dataset: Path,
+                                                                       tmp_path: Path) -> None:
+    config = LabellerConfig(data=str(small_hard_dataset), **{**TOY_MONODEPTH, "steps": 4},
+                            brightness="affine")
+    folder = train_labeller(config, tmp_path / "mono", progress=False, device="cpu")
+    record = json.loads((folder / CONFIG).read_text())
+    assert record["config"]["brightness"] == "affine" and np.isfinite(record["losses"]).all()
+    assert load_labeller(folder).record["config"]["brightness"] == "affine"
+    assert train_labeller(config, folder, progress=False) == folder  # the same labeller: kept
+    with pytest.raises(ConfigError, match="holds another labeller"):
+        train_labeller(replace(config, brightness="gain"), folder, progress=False)
+    # A folder written before the setting learnt without compensation, and loads as such.
+    del record["config"]["brightness"], record["sha256"]
+    write_checked_json(folder / CONFIG, record)
+    assert load_labeller(folder).record["config"].get("brightness") is None
+    assert train_labeller(replace(config, brightness="none"), folder, progress=False) == folder
+
+
+@pytest.mark.parametrize(("setting", "value"), [("min_depth", -0.1), ("max_depth", 0.05), ("smoothness", -1),
+                                                ("brightness", "auto")])
 def test_a_bad_monodepth_setting_is_refused_by_name(setting: str, value: float) -> None:
     with pytest.raises(ConfigError, match=f"labeller.{setting} must be"):
         LabellerConfig(data="data", method="monodepth", **{setting: value})

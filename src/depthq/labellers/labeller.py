@@ -127,6 +127,11 @@ class LabellerConfig:
     max_depth: float = 10.0
     # monodepth: weight of the edge-aware smoothness of the disparity against the photometric error.
     smoothness: float = 1e-3
+    # monodepth: how the photometric loss brings each neighbouring frame to the frame's brightness
+    # before comparing them, per frame pair and colour channel (a robot camera's auto-exposure and white
+    # balance change between frames): "none", "gain" (the ratio of their means) or "affine" (a gain and
+    # a bias, least squares over the pixels the warp sees).
+    brightness: monodepth.Brightness = "none"
     # Optimiser steps; none: the method's (floor 600, perception 4000 = a training's 40 × 100,
     # monodepth 1500).
     steps: int | None = None
@@ -142,7 +147,7 @@ class LabellerConfig:
         check_seed(self.seed)
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
-        check_choices(self, "labeller")  # method, trunk
+        check_choices(self, "labeller")  # method, trunk, brightness
         for name, value in zip(("scale", "steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
@@ -287,11 +292,13 @@ def _train_perception(dataset: Dataset, config: LabellerConfig, progress: bool, 
 
 def _config_record(record: dict[str, Any]) -> dict[str, Any]:
     """A labeller record's config, upgraded: one written before `method` existed is a perception one, a
-    floor one written before `context` existed has none."""
+    floor one written before `context` existed has none, one written before `brightness` existed
+    learnt without brightness compensation ("none")."""
     config = dict(record["config"])
     config.setdefault("method", "perception")
     if config["method"] == "floor":
         config.setdefault("context", False)
+    config.setdefault("brightness", "none")
     return to_dict(from_dict(LabellerConfig, config))
 
 

@@ -26,7 +26,7 @@ Its folder is a labeller folder (`depthq.labellers.labeller`), `name` "monodepth
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import Any, Literal
 
 import kornia
 import numpy as np
@@ -58,6 +58,10 @@ HORIZON_ROWS = 2
 # canyons' flat-shaded faces the photometric error has a gradient only within a pixel of an edge, and
 # from a near start the net can settle with every horizon beyond the clip (docs/design.md#camera-labels).
 START_DEPTH = 3.0
+# How the photometric loss brings a neighbouring frame to the target's brightness before comparing them
+# (`compensate`): not at all, a gain per colour channel, or a gain and a bias per colour channel.
+Brightness = Literal["none", "gain", "affine"]
+EPS = 1e-6  # a mean or variance below this is taken as this in `compensate`
 
 
 class DepthNet(nn.Module):
@@ -154,23 +158,57 @@ def photometric(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return SSIM_WEIGHT * ssim + (1 - SSIM_WEIGHT) * (a - b).abs().mean(1, keepdim=True)
 
 
+def compensate(source: torch.Tensor, target: torch.Tensor, valid: torch.Tensor, brightness: Brightness
+               ) -> torch.Tensor:
+    """A (warped) source frame (B, 3, H, W) brought to the target's brightness per frame and colour
+    channel: `source` · a + b with a, b the least-squares fit of the target over the `valid` pixels
+    (B, 1, H, W) ("affine"), a = the ratio of their means and b = 0 ("gain"), or `source` as it is
+    ("none"). The fit is detached: it corrects the pair's exposure and white balance, and the depth is
+    learnt from what the correction leaves."""
+    if brightness == "none":
+        return source
+    with torch.no_grad():
+        weight = valid.to(source.dtype)
+        count = weight.sum((2, 3), keepdim=True).clamp_min(1.0)
+        mean_s = (source * weight).sum((2, 3), keepdim=True) / count
+        mean_t = (target * weight).sum((2, 3), keepdim=True) / count
+        if brightness == "gain":
+            gain, bias = mean_t / mean_s.clamp_min(EPS), torch.zeros_like(mean_t)
+        else:
+            centred = (source - mean_s) * weight
+            variance = (centred**2).sum((2, 3), keepdim=True)
+            gain = (centred * (target - mean_t)).sum((2, 3), keepdim=True) / variance.clamp_min(EPS)
+            bias = mean_t - gain * mean_s
+    return source * gain + bias
+
+
 def loss(net: DepthNet, frames: torch.Tensor, transforms: torch.Tensor, camera: torch.Tensor,
-         depth_range: tuple[float, float], smoothness: float) -> torch.Tensor:
+         depth_range: tuple[float, float], smoothness: float, brightness: Brightness = "none"
+         ) -> torch.Tensor:
     """Frame triplets (B, 3, 3, H, W) (t − 1, t, t + 1) and `source_from_target` of each (B, 2, 4, 4) →
     Monodepth2's loss of frame t's predicted depth: per scale, the photometric error of the warped
-    neighbours, their per-pixel minimum, auto-masked by the unwarped neighbours' minimum, plus the
-    edge-aware smoothness of the mean-normalised disparity (weight `smoothness` / 2^scale); the mean
-    over the scales."""
+    neighbours, each brought to frame t's brightness (`compensate`, over the pixels it sees), their
+    per-pixel minimum, auto-masked by the unwarped neighbours' minimum (compensated alike, over every
+    pixel), plus the edge-aware smoothness of the mean-normalised disparity (weight `smoothness` /
+    2^scale); the mean over the scales."""
     target, sources = frames[:, 1], (frames[:, 0], frames[:, 2])
     size, matrix = target.shape[-2:], camera.expand(len(target), 3, 3)
-    still = torch.minimum(*(photometric(s, target) for s in sources))
+    everywhere = torch.ones_like(target[:, :1])
+    still = torch.minimum(*(photometric(compensate(s, target, everywhere, brightness), target)
+                            for s in sources))
+    # Each source carries a channel of ones through the warp: where it comes out whole, the pixel was
+    # in the source's view (out of view, the warp gives zeros).
+    sources = tuple(torch.cat([s, everywhere], dim=1) for s in sources)
     total = frames.new_zeros(())
     for scale, disparity in enumerate(net(target)):
         depth = depth_of(F.interpolate(disparity, size=size, mode="bilinear", align_corners=False),
                          *depth_range)
-        warped = (kornia.geometry.depth.warp_frame_depth(s, depth, transforms[:, k], matrix)
-                  for k, s in enumerate(sources))
-        total = total + torch.minimum(torch.minimum(*(photometric(w, target) for w in warped)), still).mean()
+        errors = []
+        for k, s in enumerate(sources):
+            warped = kornia.geometry.depth.warp_frame_depth(s, depth, transforms[:, k], matrix)
+            seen = warped[:, 3:] > 1 - 1e-3
+            errors.append(photometric(compensate(warped[:, :3], target, seen, brightness), target))
+        total = total + torch.minimum(torch.minimum(*errors), still).mean()
         image = F.interpolate(target, size=disparity.shape[-2:], mode="area")
         normalised = disparity / (disparity.mean((2, 3), keepdim=True) + 1e-7)
         total = total + smoothness / 2**scale * kornia.losses.inverse_depth_smoothness_loss(normalised, image)
@@ -237,7 +275,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
     def batch_loss(pool: tuple[np.ndarray, np.ndarray], idx: np.ndarray) -> torch.Tensor:
         frames = torch.from_numpy(pool[0][idx].astype(np.float32)).to(device)
         return loss(net, frames, torch.from_numpy(pool[1][idx]).to(device), camera, depth_range,
-                    config.smoothness)
+                    config.smoothness, config.brightness)
 
     optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
     losses = []
