@@ -187,3 +187,15 @@ def test_bad_tune_stages_are_refused_by_name(tmp_path: Path, capsys: pytest.Capt
     assert main(args) == 2
     assert "tune_stages must be an integer in 0..7 (0: none), got 9" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_bench_train_times_a_tuned_trunk_beside_the_head(capsys: pytest.CaptureFixture[str]) -> None:
+    from depthq.bench.train import bench_train
+
+    r = bench_train(seconds=1.0, threads=1, tunes=(0, 1))
+    head, tuned = r["variants"]["depth_first/fp32/tune0"], r["variants"]["depth_first/fp32/tune1"]
+    assert head["tune_stages"] == 0 and tuned["tune_stages"] == 1
+    assert 0 < tuned["samples_per_s"] < head["samples_per_s"]  # the stage's convolutions cost more
+    for bad in ("0,x", "9"):
+        assert main(["bench", "train", "--seconds", "1", "--tune-stages", bad]) == 2
+        assert bad.split(",")[-1] in capsys.readouterr().err
