@@ -125,6 +125,11 @@ def test_a_tuned_training_stores_its_late_stages_reloads_resumes_and_acts_as_tra
     policy = QNetPolicy.from_checkpoint(out, weights="last")
     np.testing.assert_allclose(policy.values(frame), trained_values.numpy(), atol=2e-2, rtol=1e-2)
 
+    from depthq.experiments.weights_check import measure  # its dead outputs, with each choice's stages
+
+    checked = measure(out, ("final", "average"), frames=12)
+    assert checked["final"]["frames"] == 12 and isinstance(checked["average"]["dead_bins"], list)
+
     # resumed after its first epoch, it writes the weights an uninterrupted training writes
     once = train(replace(config, epochs=1), tmp_path / "resumed", progress=False)
     train(config, once, progress=False)
