@@ -250,7 +250,7 @@ def write_record(
         "train": train,
         "head": to_dict(head),
         "trunk": trunk,
-        "trunk_frozen": TRUNKS[trunk].frozen,
+        "trunk_frozen": TRUNKS[trunk].frozen and not train.get("tune_stages"),
         "input_size": train["input_size"],
         "learning_rate": learning_rate,
         "dataset": to_dict(dataset),
@@ -288,8 +288,10 @@ def read_sidecar(folder: Path, stem: str) -> dict[str, Any]:
 
 
 def stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:
-    """The modules a checkpoint stores: the head, plus the trunk when it is trained."""
-    return [("head", model.head)] + ([] if model.trunk.frozen else [("trunk", model.trunk)])
+    """The modules a checkpoint stores: the head, plus the trunk's trained part (`Trunk.trained_part`:
+    all of a trunk trained with the head, a tuned one's late stages)."""
+    trunk = model.trunk.trained_part()
+    return [("head", model.head)] + ([] if trunk is None else [("trunk", trunk)])
 
 
 def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Path) -> None:

@@ -52,6 +52,11 @@ LITE0_STAGES: tuple[StageSpec, ...] = (
 )
 
 
+def stage_blocks(stages: int) -> int:
+    """How many MBConv blocks the first `stages` stages hold (`EfficientNetLite0._blocks[:n]`)."""
+    return sum(s.repeats for s in LITE0_STAGES[:stages])
+
+
 def same_padding(size: int, kernel: int, stride: int) -> tuple[int, int]:
     """TensorFlow "SAME" padding (before, after) for one axis: output = ceil(size / stride).
 
@@ -112,6 +117,11 @@ class MBConvBlock(nn.Module):
         return y + x if self.residual else y
 
 
+def scale_input(images: torch.Tensor) -> torch.Tensor:
+    """Images in [0, 1] → the weights' input scale, (255·x − 127) / 128."""
+    return images * (255.0 / 128.0) - (127.0 / 128.0)
+
+
 class EfficientNetLite0(nn.Module):
     """EfficientNet-Lite0 on float images in [0, 1], shape (B, 3, H, W); any H, W.
 
@@ -139,10 +149,13 @@ class EfficientNetLite0(nn.Module):
         # Classifier dropout (0.2) is left out: the classifier is only used in eval mode, by tests.
         self._fc = nn.Linear(FEATURE_DIM, N_CLASSES)
 
+    def stem(self, images: torch.Tensor) -> torch.Tensor:
+        """(B, 32, ceil(H/2), ceil(W/2)): the input scaled as the weights expect, then the stem conv."""
+        return F.relu6(self._bn0(self._conv_stem(scale_input(images))))
+
     def block_map(self, images: torch.Tensor) -> torch.Tensor:
         """(B, 320, ceil(H/32), ceil(W/32)) output of the last MBConv block, before the head conv."""
-        x = images * (255.0 / 128.0) - (127.0 / 128.0)  # [0,1] → (255·x − 127) / 128
-        x = F.relu6(self._bn0(self._conv_stem(x)))
+        x = self.stem(images)
         for block in self._blocks:
             x = block(x)
         return x

@@ -30,6 +30,7 @@ def load_qnet(
     folder, or one that does not match → an error naming the file.
     """
     record, tensors, path = read_checkpoint(Path(folder), weights, model, trunk)
-    net = QNet(build_trunk(str(record.get("trunk"))), build_head(from_dict(HeadConfig, record["head"])))
+    trunk_net = build_trunk(str(record.get("trunk")), tune_stages=record["train"].get("tune_stages", 0))
+    net = QNet(trunk_net, build_head(from_dict(HeadConfig, record["head"])))
     load_trainable_state(net, tensors, path)
     return net.eval(), record

@@ -95,7 +95,9 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     # A model in several variants (a Coll-Q-Net in a lookahead sweep, `Model.settings`) runs once.
     models = list({m.name: m for m in sweep.models()}.values())
     configs = {m: sweep.train_config(m, str(data)) for m in models}
-    frozen = sorted({(c.trunk, c.input_size) for c in configs.values() if TRUNKS[c.trunk].frozen})
+    # (a tuned trunk's training computes its activation cache itself: none of these features)
+    frozen = sorted({(c.trunk, c.input_size) for c in configs.values()
+                     if TRUNKS[c.trunk].frozen and not c.tune_stages})
     stages = [
         Stage(
             partial(collection_complete, data, collect_config),

@@ -46,6 +46,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     tr.add_argument("--hidden", default=None,
                     help="hidden widths measured side by side, comma-separated, e.g. 1024,4096 (train "
                          "--hidden; default: the default head's)")
+    tr.add_argument("--tune-stages", default=None,
+                    help="trunk stages tuned, measured side by side, comma-separated, e.g. 0,1,2 (train "
+                         "--tune-stages: the last N stages trained with the head on cached activations; "
+                         "default: 0, the head alone)")
     pol = sub.add_parser("policy", help="ms per decision, frame in → action out (≤ 10 ms median)")
     pol.add_argument(
         "--policy", action="append", default=None,
@@ -175,9 +179,12 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         precisions = _precisions(args.precision)
         forms = (None,) if args.head_form is None else tuple(args.head_form.split(","))
         hiddens = (None,) if args.hidden is None else _widths(args.hidden)
+        tunes = (0,) if args.tune_stages is None else _counts("--tune-stages", args.tune_stages)
         r = bench_train(args.seconds, device=args.device, precisions=precisions, threads=args.threads,
-                        forms=forms, hiddens=hiddens)
-        each = [f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's"
+                        forms=forms, hiddens=hiddens, tunes=tunes)
+        each = [(f"{p['samples_per_s']} samples/s (the last {p['tune_stages']} trunk stages and the head)"
+                 if p["tune_stages"] else
+                 f"{p['samples_per_s']} head samples/s, {p['head_gflops']} GFLOP/s = {p['ratio']} × matmul's")
                 + (f" ({name})" if len(r["variants"]) > 1 else "") for name, p in r["variants"].items()]
         return r, "; ".join(each) + f" {r['matmul_gflops']} fp32 GFLOP/s ({r['threads']} threads)"
     if args.what == "evaluate":
@@ -245,6 +252,14 @@ def run(args: argparse.Namespace) -> int:
     result, figure = _measure(args)
     print(json.dumps(result) if args.json else figure)
     return 0
+
+
+def _counts(flag: str, text: str) -> tuple[int, ...]:
+    """'0,1,2' → (0, 1, 2); each is checked where it is used (`train --tune-stages` checks its range)."""
+    try:
+        return tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise ConfigError(f"{flag} takes integers such as 0,1,2; got {text!r}") from None
 
 
 def _widths(text: str) -> tuple[int, ...]:

@@ -16,7 +16,7 @@ from depthq.nets.checkpoint import WEIGHTS
 from depthq.nets.heads import HEAD_FORMS, HeadConfig
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
-from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS
+from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
 from depthq.networks import get_network, network_names
 
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is
@@ -95,6 +95,10 @@ class TrainConfig:
     # L2 weight decay of the head's weights (the original's).
     weight_decay: float = WEIGHT_DECAY
     trunk: TrunkName = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.nets.trunk)
+    # N > 0 trains the trunk's last N of its 7 MBConv stages with the head, from a cache of the frozen
+    # early stages' activations per frame (docs/design.md#tuned-trunk; a column or grid trunk); the
+    # checkpoint stores those stages. 0: the trunk as it is (frozen: the head alone is trained).
+    tune_stages: int = field(default=0, metadata=OMIT_DEFAULT)
     # Dropout on the feature; the paper's 0.5 blurs a frozen feature's predictions
     # (docs/deviations.md#dropout).
     dropout: float = 0.0
@@ -200,6 +204,7 @@ class TrainConfig:
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value < high:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
         check_choices(self, "train")  # trunk, depth_loss, head_form, labels, weights, precision
+        check_tune_stages(self.trunk, self.tune_stages)
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
         network.check_head(self.head())  # the head's rules (projection size) and its network's (form)
@@ -240,6 +245,9 @@ class TrainConfig:
     def _check_projection(self) -> None:
         _int_at_least("feature_projection", self.feature_projection, 0)
         p, trunk = self.feature_projection, TRUNKS[self.trunk]
+        if p and self.tune_stages:
+            raise ConfigError(f"train.feature_projection {p}: the projection is fitted to a frozen trunk's "
+                              f"features, but tune_stages {self.tune_stages} trains the trunk; use 0")
         if p and not trunk.frozen:
             raise ConfigError(
                 f"train.feature_projection {p}: only a frozen trunk's cached features are projected, but "
@@ -256,10 +264,11 @@ class TrainConfig:
         if isinstance(g, bool) or not isinstance(g, int | float) or not 0 <= g < 1:
             raise ConfigError(f"train.bootstrap must be in [0, 1) (0: the one-step target), got {g!r}")
         if g and (not get_network(self.model).bootstraps or self.lookahead != 1
-                  or not TRUNKS[self.trunk].frozen):
+                  or not TRUNKS[self.trunk].frozen or self.tune_stages):
             raise ConfigError(
                 f"train.bootstrap {g}: a one-step Depth-Q-Net on a frozen trunk's cached features only "
-                f"(model {self.model!r}, lookahead {self.lookahead}, trunk {self.trunk!r}); use 0"
+                f"(model {self.model!r}, lookahead {self.lookahead}, trunk {self.trunk!r}, tune_stages "
+                f"{self.tune_stages}); use 0"
             )
 
     def head(self) -> HeadConfig:

@@ -23,6 +23,12 @@ one whose array does not match it is a DataError (delete the folder to compute i
 
 float16 keeps the cache at half the size; EfficientNet-Lite0 features are averages of activations
 of magnitude < 10, so rounding errs by at most 2⁻¹¹ relative (< 0.005 absolute).
+
+A trunk tuned from cached activations (`TrainConfig.tune_stages`, docs/design.md#tuned-trunk) reads
+the activation cache of its frozen early stages (`load_activations`): the same layout, format and
+checks, the early stages' flattened map as each frame's row, in DIR/features/<early trunk>_<size>/
+(`depthq.nets.trunk.early_trunk_name`: efficientnet_lite0_stage5_128 for a trunk tuning its last 2
+stages, 7168 numbers a frame).
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import os
 import queue
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,7 +49,16 @@ from depthq.configio import provenance, read_json, write_json
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
-from depthq.nets.trunk import Trunk, build_trunk, preprocess, trunk_spec
+from depthq.nets.trunk import (
+    STAGES,
+    Trunk,
+    build_early_trunk,
+    build_trunk,
+    early_map_shape,
+    early_trunk_name,
+    preprocess,
+    trunk_spec,
+)
 from depthq.parallel import cores
 from depthq.progress import Bar
 
@@ -86,15 +101,36 @@ def load_features(
 ) -> FeatureTable:
     """The cached features of `dataset` (`mirrored`: of its frames flipped left to right), computed
     first (on `device`) if missing or stale."""
+    if not trunk_spec(trunk).frozen:
+        raise ConfigError(f"trunk {trunk!r} is trained with the head: no feature cache")
+    return _load(dataset, trunk, trunk_spec(trunk).feature_dim, lambda: build_trunk(trunk), size, progress,
+                 device, mirrored)
+
+
+def load_activations(
+    dataset: Dataset, tune_stages: int, size: int, progress: bool = True, device: torch.device | str = "cpu",
+    mirrored: bool = False,
+) -> FeatureTable:
+    """The cached map of the frozen early stages of a trunk whose last `tune_stages` stages are tuned
+    (`depthq.nets.trunk.build_early_trunk`), one flattened row per frame, computed first if missing or
+    stale; as `load_features` otherwise."""
+    frozen = STAGES - tune_stages
+    channels, side, _ = early_map_shape(frozen, size)
+    return _load(dataset, early_trunk_name(frozen), channels * side * side,
+                 lambda: build_early_trunk(frozen, size), size, progress, device, mirrored)
+
+
+def _load(
+    dataset: Dataset, trunk: str, feature_dim: int, build: Callable[[], Trunk], size: int, progress: bool,
+    device: torch.device | str, mirrored: bool,
+) -> FeatureTable:
+    """The cache of the frozen trunk `build` makes (`trunk`, giving `feature_dim` numbers a frame)."""
     folder = cache_dir(dataset.root, trunk, size, mirrored)
-    expected = _index(dataset, trunk, size, mirrored)
+    expected = _index(dataset, trunk, feature_dim, size, mirrored)
     table = _read(folder, expected)
     if table is not None:
         return table
-    net = build_trunk(trunk)
-    if not net.frozen:
-        raise ConfigError(f"trunk {trunk!r} is trained with the head: no feature cache")
-    compute_features(dataset, net.to(device), size, folder, expected, progress)
+    compute_features(dataset, build().to(device), size, folder, expected, progress)
     table = _read(folder, expected)
     if table is None:
         raise DataError(f"{folder}: feature cache just written does not read back")
@@ -109,7 +145,8 @@ def trunk_threads() -> int:
 
 def features_ready(dataset: Dataset, trunk: str, size: int) -> bool:
     """Whether a valid cache of `dataset` for (trunk, size) is on disk."""
-    return _read(cache_dir(dataset.root, trunk, size), _index(dataset, trunk, size)) is not None
+    expected = _index(dataset, trunk, trunk_spec(trunk).feature_dim, size)
+    return _read(cache_dir(dataset.root, trunk, size), expected) is not None
 
 
 def compute_features(
@@ -186,9 +223,8 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _index(dataset: Dataset, trunk: str, size: int, mirrored: bool = False) -> dict:
+def _index(dataset: Dataset, trunk: str, feature_dim: int, size: int, mirrored: bool = False) -> dict:
     """What index.json must say for the cache to be valid (minus the file's size)."""
-    spec = trunk_spec(trunk)
     runs, row = {}, 0
     for entry in dataset.entries():
         runs[entry.name] = [row, entry.n_frames]
@@ -201,7 +237,7 @@ def _index(dataset: Dataset, trunk: str, size: int, mirrored: bool = False) -> d
         "input_size": size,
         "fingerprint": dataset.fingerprint(),
         "runs": runs,
-        "shape": [row, spec.feature_dim],
+        "shape": [row, feature_dim],
         **({"mirrored": True} if mirrored else {}),
     }
 

@@ -7,8 +7,9 @@ a killed training's temporaries are removed when it resumes):
                              which owns the format: this file and the weight files, version, digests)
     best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*",
     last.safetensors         its fitted feature projection's buffers "head.projection.*" included),
-                             and the trunk's ("trunk.*") when it is trained; a frozen trunk is not
-                             stored, it is rebuilt from the package's pretrained weights
+                             and the trunk's ("trunk.*") when it is trained (a tuned one's late
+                             stages only); a frozen trunk, or a tuned one's frozen stages, is not
+                             stored: it is rebuilt from the package's pretrained weights
     epoch_0040.safetensors   the weights after an epoch of `TrainConfig.snapshots` (kept on resume)
     average.safetensors      the mean of the weights after each epoch of the training's last
                              fraction `TrainConfig.average` so far (from its first epoch on)
@@ -85,7 +86,7 @@ class TrainState:
 def build_qnet(config: TrainConfig) -> QNet:
     """The network `config` trains: its trunk (pretrained if it has weights) and a fresh head (its
     feature projection, if any, not fitted yet: `depthq.train.trainer` fits it)."""
-    return QNet(build_trunk(config.trunk), build_head(config.head()))
+    return QNet(build_trunk(config.trunk, tune_stages=config.tune_stages), build_head(config.head()))
 
 
 def trainable_state(model: QNet) -> dict[str, torch.Tensor]:

@@ -1,9 +1,11 @@
 """Training batches of one view, "a random run, then a random frame of it" (docs/design.md#sampling).
 
-Two sources with one interface, so the training loop does not care which trunk it trains:
+Three sources with one interface, so the training loop does not care which trunk it trains:
 
 - `FeatureSamples`: a frozen trunk's cached features, held in memory (float16), batches in
   microseconds; the model runs its head only.
+- `ActivationSamples`: the cached map of a tuned trunk's frozen early stages, read batch by batch;
+  the model runs its late stages and its head.
 - `ImageSamples`: frames decoded from the run files and resized once, held as uint8, for a trunk
   trained with the head (MobileNet-v1-0.25 from scratch, EfficientNet-Lite0 fine-tuned).
 """
@@ -89,8 +91,8 @@ class FeatureSamples(Samples):
         super().__init__(arrays)
         following_rows = {**arrays, "frame_id": arrays["frame_id"] + 1}
         tables = (table,) if mirrored is None else (table, mirrored)
-        self.features = _stack([t.gather(split, arrays) for t in tables])  # (1 or 2, S, D)
-        self.following = _stack([t.gather(split, following_rows) for t in tables]) if following else None
+        self.features = self._gather(tables, split, arrays)  # [m, i]: sample i's features, m: mirrored
+        self.following = self._gather(tables, split, following_rows) if following else None
         self.targets = torch.stack([self.targets, self.targets.flip(-1) if self.targets.ndim > 1
                                     else self.targets])[: len(tables)]
         if self.current is not None:
@@ -114,6 +116,57 @@ class FeatureSamples(Samples):
 
     def trunk_features(self, model: QNet, batch: Batch) -> torch.Tensor:
         return batch.inputs
+
+    @staticmethod
+    def _gather(
+        tables: tuple[FeatureTable, ...], split: str, arrays: dict[str, np.ndarray]
+    ) -> torch.Tensor | MappedRows:
+        """The samples' rows of each table, in memory: (len(tables), S, D)."""
+        return _stack([t.gather(split, arrays) for t in tables])
+
+
+class ActivationSamples(FeatureSamples):
+    """Samples of a trunk tuned from cached activations (docs/design.md#tuned-trunk): its frozen early
+    stages' map per frame (`depthq.train.features.load_activations`), read batch by batch from the
+    memory-mapped cache (at 7168 numbers a frame, 500 runs' frames would take ≈ 0.5 GB of memory per
+    table); the late stages and the head run on it. Mirrored as `FeatureSamples` are, from the
+    activations of the flipped frames: the early stages' stride-2 convolutions pad one side only
+    (TensorFlow's "SAME"), so flipping a frame's cached map is not the map of the flipped frame."""
+
+    def predict(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return model.head(self.trunk_features(model, batch), batch.actions)
+
+    def trunk_features(self, model: QNet, batch: Batch) -> torch.Tensor:
+        return model.trunk.late_features(batch.inputs)
+
+    @staticmethod
+    def _gather(
+        tables: tuple[FeatureTable, ...], split: str, arrays: dict[str, np.ndarray]
+    ) -> torch.Tensor | MappedRows:
+        rows = [t.rows(split, arrays["run_id"], arrays["frame_id"]) for t in tables]
+        return MappedRows(tables, np.stack(rows))
+
+
+class MappedRows:
+    """Rows of memory-mapped tables read on demand: `[m, i]` is sample i's row of table m[i], as one
+    float16 tensor (B, D)."""
+
+    def __init__(self, tables: tuple[FeatureTable, ...], rows: np.ndarray) -> None:
+        self.arrays = [t.features for t in tables]
+        self.rows = rows  # (len(tables), S)
+
+    def __len__(self) -> int:
+        """The tables, as a stacked tensor's first axis counts them."""
+        return len(self.arrays)
+
+    def __getitem__(self, key: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
+        m, i = (k.numpy() for k in key)
+        out = np.empty((len(i), self.arrays[0].shape[1]), dtype=np.float16)
+        for table, array in enumerate(self.arrays):
+            taken = m == table
+            if taken.any():
+                out[taken] = array[self.rows[table, i[taken]]]
+        return torch.from_numpy(out)
 
 
 def _stack(tensors: list[torch.Tensor]) -> torch.Tensor:

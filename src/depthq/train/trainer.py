@@ -31,8 +31,8 @@ from depthq.progress import Bar
 from depthq.train import folder
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
-from depthq.train.features import load_features
-from depthq.train.samples import Batch, FeatureSamples, ImageSamples, Samples
+from depthq.train.features import load_activations, load_features
+from depthq.train.samples import ActivationSamples, Batch, FeatureSamples, ImageSamples, Samples
 
 
 class DivergedError(ConfigError):
@@ -189,11 +189,19 @@ def train_step(
 def _samples(
     config: TrainConfig, dataset: Dataset, progress: bool, device: torch.device
 ) -> tuple[Samples, Samples]:
-    """Training and validation samples: cached features for a frozen trunk, decoded images otherwise."""
+    """Training and validation samples: cached features for a frozen trunk, cached activations of its
+    frozen stages for a tuned one, decoded images otherwise."""
     network = get_network(config.model)
     arrays = {split: network.samples(dataset, split, n, config)
               for split, n in (("train", config.runs), ("val", None))}
     _check_labels(config, arrays["train"]["target"])
+    if config.tune_stages:
+        n, size = config.tune_stages, config.input_size
+        table = load_activations(dataset, n, size, progress, device)
+        mirrored = (load_activations(dataset, n, size, progress, device, mirrored=True)
+                    if config.mirror else None)
+        return (ActivationSamples(arrays["train"], table, "train", mirrored=mirrored),
+                ActivationSamples(arrays["val"], table, "val"))
     if TRUNKS[config.trunk].frozen:
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
         mirrored = (load_features(dataset, config.trunk, config.input_size, progress, device, mirrored=True)
