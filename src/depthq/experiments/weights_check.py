@@ -31,10 +31,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from depthq.configio import write_json
-from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.lock import exclusive
@@ -47,32 +45,19 @@ from depthq.nets.checkpoint import (
     weights_stem,
 )
 from depthq.nets.heads import DepthFirstHead
+from depthq.networks.dead_outputs import dead_outputs, split_features
 from depthq.policies.qnet import QNetPolicy
 from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig
-from depthq.train.features import load_features
 
 PROG = "python -m depthq.experiments.weights_check"
-DEAD = 1e-6  # m: a bin predicted at or below this is no reading
+DEAD = 1e-6  # m: a bin predicted at or below this counts as no phantom reading
 
 
 def available(folder: Path) -> tuple[str, ...]:
     """The weights choices a checkpoint holds: final and best, and average when its training kept one."""
     return tuple(choice for choice in ("final", "best", "average")
                  if (Path(folder) / f"{weights_stem(choice)}.safetensors").is_file())
-
-
-def validation_features(folder: Path, frames: int) -> torch.Tensor:
-    """The trunk features of the first `frames` validation frames of the checkpoint's dataset."""
-    config = read_config(folder)
-    dataset = Dataset.open(Path(dataset_record(config).path))
-    train = config["train"]
-    table = load_features(dataset, train["trunk"], int(train["input_size"]), progress=False)
-    spans = [table.runs[name] for name in sorted(table.runs) if name.startswith("val_")]
-    if not spans:
-        raise ConfigError(f"{folder}: its dataset {dataset.root} has no validation runs to look at")
-    rows = np.concatenate([np.arange(first, first + n) for first, n in spans])[:frames]
-    return torch.from_numpy(np.asarray(table.features[rows], dtype=np.float32))
 
 
 def range_min(folder: Path) -> float:
@@ -86,7 +71,7 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
     """Per weights choice: dead bins, phantom readings (their share of candidates and their bins), the
     median and 90th percentile of the candidates' score spread, and the share of frames on which each
     action wins."""
-    features = validation_features(folder, frames)
+    features = split_features(folder, "val", frames)
     floor = range_min(folder)
     out = {}
     for choice in weights:
@@ -97,7 +82,7 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
         chosen = np.array([policy.network.choose(v, actions) for v in values])
         dead, phantom, phantom_bins = np.array([], int), 0.0, []
         if values.ndim == 3:  # bins: (F, A, n_bins)
-            dead = np.flatnonzero((values <= DEAD).all(axis=(0, 1)))
+            dead = np.array(dead_outputs(values), int)
             readings = np.where(values > DEAD, values, np.inf)
             nearest = readings.min(axis=2)
             ghost = nearest < floor
@@ -124,7 +109,7 @@ def score_spreads(policy: QNetPolicy, values: np.ndarray) -> np.ndarray:
 def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, float]]:
     """A depth_first head's score spread with one choice's perception (rows) and another's dynamics
     (columns): which part of a weights choice changes its actions."""
-    features = validation_features(folder, frames)
+    features = split_features(folder, "val", frames)
     policies = {choice: QNetPolicy.from_checkpoint(folder, weights=choice) for choice in weights}
     if not all(isinstance(p.net.head, DepthFirstHead) for p in policies.values()):
         raise ConfigError(f"{folder}: --parts needs a depth_first head (perception, then dynamics)")
