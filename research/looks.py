@@ -103,12 +103,13 @@ NOT_MEASURED = "not yet measured"
 # on camera labels.
 _PINNED_DEPTH: dict[str, Any] = {
     "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
-    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
-    "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
+    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "tune_stages": 0,
+    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
     "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "depth_first",
-    "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
-    "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
-    "samples.action_lag": 0, "weights": "average", "snapshots": [], "average": 0.25, "precision": "fp32",
+    "output_bias": 0.0, "bin_gradient": "relu", "bootstrap": 0.0, "mirror": False, "labels": "lidar",
+    "samples.horizon": 5, "samples.min_frames": 20, "samples.every_run_end": True,
+    "samples.action_clip": 1.0, "samples.action_lag": 0, "weights": "average", "snapshots": [],
+    "average": 0.25, "precision": "fp32",
 }
 PINNED_TRAINING: dict[str, dict[str, Any]] = {
     "depth": _PINNED_DEPTH,
@@ -119,7 +120,7 @@ PINNED_LABELLER: dict[str, Any] = {
     "trunk": "efficientnet_lite0_columns", "input_size": 128, "hidden": 4096, "scale": 4, "width": 16,
     "context": True, "lookahead": 12, "nearest": 0.3, "memory_s": 2.0, "pool_frames": 6, "pool_runs": 300,
     "min_depth": 0.1, "max_depth": 10.0, "smoothness": 0.001, "steps": 1500, "batch_size": 8, "lr": 0.001,
-    "seed": 0,
+    "seed": 0, "brightness": "none",
 }
 PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller trains as it does today
 

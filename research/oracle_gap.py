@@ -36,15 +36,14 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-import torch
 
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
-from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.networks import get_network, load_qnet
+from depthq.networks import get_network
+from depthq.networks.dead_outputs import count_dead_outputs, dead_outputs
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (
@@ -56,7 +55,6 @@ from depthq.pipeline.sweep import (
 )
 from depthq.report.build import build_report
 from depthq.report.cells import mean_interval, ranks_driving
-from depthq.train.features import load_features
 
 
 @dataclass(frozen=True)
@@ -263,12 +261,6 @@ MISTAKES = ("turned the wrong way", "straight where the oracle turned",
             "turned where the oracle went straight")
 
 
-def _always_zero(values: np.ndarray) -> list[int]:
-    """The bins of (rows, candidates, bins) values that are 0 in every row and for every candidate:
-    a bin predicted 0 is no reading to the policy, so one 0 everywhere is a direction it never sees."""
-    return np.where((values <= 0).all(axis=(0, 1)))[0].tolist()
-
-
 def _band_labels() -> list[str]:
     return [f"{lo:g}–{hi:g} m" if np.isfinite(hi) else f"≥ {lo:g} m" for lo, hi in pairwise(ROOM_BANDS)]
 
@@ -304,7 +296,7 @@ def where_it_fails(out: Path) -> dict[str, dict[str, Any]]:
             valid = truth > 0
             error = np.where(valid, np.abs(a["predicted"] - truth), 0).sum((0, 1)) / valid.sum((0, 1))
             result["bin_error"] = error.tolist()
-            result["dead_bins"] = _always_zero(a["predicted"])
+            result["dead_bins"] = list(dead_outputs(a["predicted"]))
         results[name] = result
     return results
 
@@ -381,13 +373,10 @@ DEAD_FRAMES = 3000  # training frames `dead` looks at
 
 def dead_bins(folder: Path, frames: int = DEAD_FRAMES) -> list[int]:
     """The bins a one-step Depth-Q-Net checkpoint predicts as 0 for every candidate action on the
-    first `frames` frames of its own dataset's feature cache: bins its policy never sees (a 0 is no
-    reading), whatever the frame."""
-    net, record = load_qnet(Path(folder))
-    table = load_features(Dataset.open(record["train"]["data"]), record["trunk"], record["input_size"],
-                          progress=False)
-    features = torch.from_numpy(np.asarray(table.features[:frames], dtype=np.float32))
-    return _always_zero(net.candidate_outputs(features, torch.tensor(ACTIONS)).numpy())
+    first `frames` training frames of its own dataset (`count_dead_outputs`; `depthq probe --parts
+    dead` looks at the validation frames): bins its policy never sees, whatever the frame."""
+    found = count_dead_outputs(Path(folder), split="train", frames=frames)
+    return list(found.dead) if found is not None else []
 
 
 def compare(named: list[tuple[str, Path]]) -> str:

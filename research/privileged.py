@@ -77,7 +77,8 @@ def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> to
     # One step, the action appended, the input unprojected.
     head = build_head(HeadConfig(net, table.features.shape[1], hidden=config.hidden, dropout=0.0,
                                  action_scale=config.action_scale, lookahead=1, feature_projection=0,
-                                 form="concat", output_bias=config.output_bias))
+                                 form="concat", output_bias=config.output_bias,
+                                 bin_gradient=config.bin_gradient))
     model = torch.nn.Module()
     model.head = head  # `train_step` runs the head on `samples.trunk_features(model, batch)`: the cached ones
     optimizer = make_optimizer(head, config.learning_rate, config.weight_decay, config.rho, config.eps)

@@ -31,10 +31,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 
 from depthq.configio import write_json
-from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.lock import exclusive
@@ -47,43 +45,19 @@ from depthq.nets.checkpoint import (
     weights_stem,
 )
 from depthq.nets.heads import DepthFirstHead
+from depthq.networks.dead_outputs import dead_outputs, net_features, split_features
 from depthq.policies.qnet import QNetPolicy
 from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig
-from depthq.train.features import load_activations, load_features
 
 PROG = "python -m research.weights_check"
-DEAD = 1e-6  # m: a bin predicted at or below this is no reading
+DEAD = 1e-6  # m: a bin predicted at or below this counts as no phantom reading
 
 
 def available(folder: Path) -> tuple[str, ...]:
     """The weights choices a checkpoint holds: final and best, and average when its training kept one."""
     return tuple(choice for choice in ("final", "best", "average")
                  if (Path(folder) / f"{weights_stem(choice)}.safetensors").is_file())
-
-
-def validation_features(folder: Path, frames: int) -> torch.Tensor:
-    """The cached trunk features of the first `frames` validation frames of the checkpoint's dataset;
-    of a trunk tuned from cached activations, those activations (`policy_features` makes the features)."""
-    config = read_config(folder)
-    dataset = Dataset.open(Path(dataset_record(config).path))
-    train = config["train"]
-    size, tune = int(train["input_size"]), train.get("tune_stages", 0)
-    table = (load_activations(dataset, tune, size, progress=False) if tune
-             else load_features(dataset, train["trunk"], size, progress=False))
-    spans = [table.runs[name] for name in sorted(table.runs) if name.startswith("val_")]
-    if not spans:
-        raise ConfigError(f"{folder}: its dataset {dataset.root} has no validation runs to look at")
-    rows = np.concatenate([np.arange(first, first + n) for first, n in spans])[:frames]
-    return torch.from_numpy(np.asarray(table.features[rows], dtype=np.float32))
-
-
-@torch.inference_mode()
-def policy_features(policy: QNetPolicy, cached: torch.Tensor) -> torch.Tensor:
-    """The features `policy` sees for `validation_features`' rows: a tuned trunk's late stages (each
-    weights choice has its own) run on the cached activations; else the cached features themselves."""
-    trunk = policy.net.trunk
-    return cached if trunk.trained_part() is None else trunk.late_features(cached)
 
 
 def range_min(folder: Path) -> float:
@@ -97,19 +71,19 @@ def measure(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[s
     """Per weights choice: dead bins, phantom readings (their share of candidates and their bins), the
     median and 90th percentile of the candidates' score spread, and the share of frames on which each
     action wins."""
-    cached = validation_features(folder, frames)
+    cached = split_features(folder, "val", frames)
     floor = range_min(folder)
     out = {}
     for choice in weights:
         policy = QNetPolicy.from_checkpoint(folder, weights=choice)
         # (F, A, 26) bins or (F, A) probabilities
-        values = policy.candidate_values(policy_features(policy, cached))
+        values = policy.candidate_values(net_features(policy.net, cached))
         actions = np.asarray(policy.actions)
         spreads = score_spreads(policy, values)
         chosen = np.array([policy.network.choose(v, actions) for v in values])
         dead, phantom, phantom_bins = np.array([], int), 0.0, []
         if values.ndim == 3:  # bins: (F, A, n_bins)
-            dead = np.flatnonzero((values <= DEAD).all(axis=(0, 1)))
+            dead = np.array(dead_outputs(values), int)
             readings = np.where(values > DEAD, values, np.inf)
             nearest = readings.min(axis=2)
             ghost = nearest < floor
@@ -136,7 +110,7 @@ def score_spreads(policy: QNetPolicy, values: np.ndarray) -> np.ndarray:
 def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str, dict[str, float]]:
     """A depth_first head's score spread with one choice's perception (rows) and another's dynamics
     (columns): which part of a weights choice changes its actions."""
-    cached = validation_features(folder, frames)
+    cached = split_features(folder, "val", frames)
     policies = {choice: QNetPolicy.from_checkpoint(folder, weights=choice) for choice in weights}
     if not all(isinstance(p.net.head, DepthFirstHead) for p in policies.values()):
         raise ConfigError(f"{folder}: --parts needs a depth_first head (perception, then dynamics)")
@@ -146,7 +120,7 @@ def parts(folder: Path, weights: tuple[str, ...], frames: int = 500) -> dict[str
         for dynamics, other in policies.items():
             mixed = copy.deepcopy(policy)
             mixed.net.head.output["dynamics"].load_state_dict(other.net.head.output["dynamics"].state_dict())
-            values = mixed.candidate_values(policy_features(mixed, cached))  # its perception's trunk
+            values = mixed.candidate_values(net_features(mixed.net, cached))  # its perception's trunk
             out[perceive][dynamics] = float(np.median(score_spreads(mixed, values)))
     return out
 

@@ -53,7 +53,8 @@ def test_a_version_1_checkpoint_reads_as_today(tmp_path: Path) -> None:
     assert record["format_version"] == FORMAT_VERSION
     assert from_dict(TrainConfig, record["train"]) == TrainConfig(**OLD_TRAIN, weights="best")
     assert _head(record) == HeadConfig("depth", 1280, hidden=4096, dropout=0.5, action_scale=1.0, lookahead=1,
-                                       feature_projection=0, form="concat", output_bias=0.0)
+                                       feature_projection=0, form="concat", output_bias=0.0,
+                                       bin_gradient="relu")
     assert policy_record(record) == LEGACY_POLICY
     assert dataset_record(record).fingerprint is None and dataset_record(record).path == OLD_DATA
 
@@ -89,9 +90,9 @@ def test_a_version_3_checkpoint_written_today_reads_as_it_is(tmp_path: Path) -> 
 
 
 def test_a_head_record_without_the_fields_added_since_reads_as_it_did(tmp_path: Path) -> None:
-    """A checkpoint's "head" written before action_scale, lookahead, feature_projection or form (added in
-    that order), or with form "concat" (left out of records until #33), reads as the defaults HeadConfig
-    had then, in a version 1 record and a version 3 one alike."""
+    """A checkpoint's "head" written before action_scale, lookahead, feature_projection, form, output_bias
+    or bin_gradient (added in that order), or with form "concat" (left out of records until #33), reads
+    as the defaults HeadConfig had then, in a version 1 record and a version 3 one alike."""
     from depthq.nets.checkpoint import FORMAT
 
     stored = json.loads((STORED / "checkpoints" / "heads_before_their_fields.json").read_text())

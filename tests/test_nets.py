@@ -330,3 +330,36 @@ def test_an_output_bias_starts_every_depth_bin_alive(form):
                        ({"kind": "coll", "output_bias": 1.0}, "Depth-Q-Net")):
         with pytest.raises(ConfigError, match=match):
             build_head(paper_head(**{"kind": "depth", "feature_dim": 256, **bad}))
+
+
+@pytest.mark.parametrize("form", ["concat", "per_action", "depth_first"])
+def test_a_straight_through_bin_gradient_changes_the_gradient_below_0_and_no_value(form):
+    """bin_gradient "straight_through": the bins are the ReLU's to the bit, in training and acting, but a
+    bin below 0 for every input (dead behind the ReLU: no gradient) gets the gradient it would have
+    without the ReLU, so its bias moves towards a near target."""
+    heads = {}
+    for gradient in ("relu", "straight_through"):
+        torch.manual_seed(3)
+        heads[gradient] = build_head(paper_head("depth", 64, dropout=0.0, action_scale=10.0, form=form,
+                                                bin_gradient=gradient))
+    last = heads["relu"].output["dynamics"][-1] if form == "depth_first" else heads["relu"].output
+    with torch.no_grad():
+        last.bias.view(-1, 26)[:, 0] = -100.0  # bin 0 (of every anchor) below 0 for every input
+    heads["straight_through"].load_state_dict(heads["relu"].state_dict())
+    features, actions = torch.rand(32, 64), torch.tensor([-1.0, 0.0, 1.0, 0.5]).repeat(8)
+    outs = {gradient: head(features, actions) for gradient, head in heads.items()}
+    assert torch.equal(outs["relu"], outs["straight_through"])
+    assert (outs["relu"][:, 0] == 0).all() and (outs["relu"] >= 0).all()
+    bias_gradients = {}
+    for gradient, head in heads.items():
+        outs[gradient].sum().neg().backward()  # a loss that wants every bin larger
+        layer = head.output["dynamics"][-1] if form == "depth_first" else head.output
+        bias_gradients[gradient] = layer.bias.grad[0].item()
+    assert bias_gradients["relu"] == 0 and bias_gradients["straight_through"] < 0
+    with torch.no_grad():
+        acting = [head.eval()(features, actions) for head in heads.values()]
+    assert torch.equal(*acting)
+    for bad, match in (({"bin_gradient": "leaky"}, "bin_gradient"),
+                       ({"kind": "coll", "bin_gradient": "straight_through"}, "Depth-Q-Net")):
+        with pytest.raises(ConfigError, match=match):
+            build_head(paper_head(**{"kind": "depth", "feature_dim": 64, **bad}))

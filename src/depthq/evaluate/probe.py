@@ -13,6 +13,8 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
   runs (`depthq.evaluate.oracle.agreement`), with per-step arrays and a figure.
 - `dqn`: a small dataset collected at a rate, one Depth-Q-Net trained on it and driven in `val`
   canyons (at the data's rate): the end-to-end check, in a few minutes.
+- `dead`: for checkpoint folders, how many of a Depth-Q-Net's outputs are dead, 0 for every
+  validation frame and candidate action (`depthq.networks.dead_outputs`), from the feature cache.
 """
 
 from __future__ import annotations
@@ -31,13 +33,14 @@ from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_agreement
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
+from depthq.networks.dead_outputs import count_dead_outputs
 from depthq.parallel import worker_context
 from depthq.progress import Bar
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
 from depthq.train.trainer import train
 
-PARTS = ("stats", "oracle", "dqn", "agreement")
+PARTS = ("stats", "oracle", "dqn", "agreement", "dead")
 VAL_CANYONS = "val:1000-1019"  # far from the validation runs' canyons (val:0..89)
 PAPER_FRAMES_PER_RUN = sum(s for s, _ in PAPER_TABLE2.values()) / sum(PAPER_TABLE2) + 1
 
@@ -106,14 +109,18 @@ def probe(
     oracles: tuple[Oracle, ...] = (Oracle(),),
     evaluations: tuple[Path, ...] = (),
     predictions: bool = False,
+    checkpoints: tuple[Path, ...] = (),
 ) -> dict[str, Any]:
     """Run the chosen parts at each rate; returns (and the CLI writes) everything measured. `family`:
     the canyon family of the OU statistics (the oracle and the small net drive in `canyons`);
     `oracles`: those the oracle and agreement parts use; `evaluations`: the agreement part's folders
-    (`predictions`: with the checkpoint's own values re-predicted at every step)."""
+    (`predictions`: with the checkpoint's own values re-predicted at every step); `checkpoints`: the
+    dead part's."""
     unknown = sorted(set(parts) - set(PARTS))
     if unknown:
         raise ConfigError(f"unknown probe part(s) {unknown}; expected some of {PARTS}")
+    if "dead" in parts and not checkpoints:
+        raise ConfigError("probe part 'dead' needs checkpoint folders (--checkpoints)")
     result: dict[str, Any] = {"rates": list(rates)}
     if "stats" in parts:
         result["stats"] = _parallel(ou_statistics, [(hz, stats_runs, 0, None, family) for hz in rates])
@@ -125,11 +132,22 @@ def probe(
             raise ConfigError("probe part 'agreement' needs evaluation folders (--evals)")
         result["agreement"] = [measure_agreement(e, o, out, predictions)
                                for e in evaluations for o in oracles]
+    if "dead" in parts:
+        result["dead"] = [dead_record(folder) for folder in checkpoints]
     if "dqn" in parts:
         result["dqn"] = {
             f"{hz:g}": small_dqn(hz, out / f"hz{hz:g}", dqn_runs, canyons, epochs) for hz in rates
         }
     return result
+
+
+def dead_record(folder: Path) -> dict[str, Any]:
+    """A checkpoint's dead outputs on its validation frames (`count_dead_outputs`), as probe.json holds
+    them; `dead_outputs` None for a net without depth bins."""
+    found = count_dead_outputs(folder)
+    return {"checkpoint": str(folder), "dead_outputs": None if found is None else list(found.dead),
+            **({} if found is None else {k: getattr(found, k) for k in ("outputs", "frames", "candidates")}),
+            "text": "no depth bins" if found is None else str(found)}
 
 
 def agreement_file(out: Path, evaluation: str, oracle: Oracle, suffix: str) -> Path:

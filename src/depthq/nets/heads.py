@@ -19,6 +19,12 @@ linear map (docs/design.md#heads): the top-P principal directions of the trainin
 (`pca_projection`), held as buffers, so the optimizer never sees them while checkpoints, policies and
 the ONNX graph carry them. P = 0 is the head without it: the same parameters, initialisation, state
 dict and outputs.
+
+A Depth-Q-Net head's `bin_gradient` (docs/design.md#dead-outputs) says what its output ReLU passes back:
+"relu" its own gradient, none below 0, so a bin whose pre-activation is below 0 for every input is
+0 for good (dead: no reading to the policy); "straight_through" the gradient as if the ReLU were not
+there, so a bin below 0 where its target is near is pulled up as one above it. The values are the
+ReLU's either way, to the bit: the setting changes training only.
 """
 
 from __future__ import annotations
@@ -38,6 +44,8 @@ from depthq.nets.trunk import Trunk
 # "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
 # "depth_first": the current bins from the feature, then the next bins from them and the action.
 HEAD_FORMS: tuple[str, ...] = ("concat", "per_action", "depth_first")
+# What a Depth-Q-Net's output ReLU passes back in training: its own gradient, or the straight-through one.
+BIN_GRADIENTS: tuple[str, ...] = ("relu", "straight_through")
 ANCHORS = (-1.0, 0.0, 1.0)  # the actions a "per_action" head predicts; a command in between blends two
 COLL_HIDDEN = 25
 _PCA_CHUNK = 8192  # feature rows per float64 block of the covariance sum: memory stays ≈ 80 MB
@@ -62,6 +70,7 @@ class HeadConfig:
     feature_projection: int  # P > 0: the feature projected to P numbers first; 0: none
     form: str  # one of HEAD_FORMS (`TrainConfig.head_form`)
     output_bias: float  # the initial bias of a layer that outputs depth bins, m (`TrainConfig.output_bias`)
+    bin_gradient: str  # one of BIN_GRADIENTS: what the bins' ReLU passes back (`TrainConfig.bin_gradient`)
     n_bins: int = 26  # the depth bins (`depthq.sim.sensors.BinConfig`); not a training setting
 
     def __post_init__(self) -> None:
@@ -81,6 +90,10 @@ class HeadConfig:
         bias = self.output_bias
         if isinstance(bias, bool) or not isinstance(bias, int | float) or not 0 <= bias < math.inf:
             raise ConfigError(f"HeadConfig.output_bias must be a finite number >= 0, got {bias!r}")
+        if self.bin_gradient not in BIN_GRADIENTS:
+            raise ConfigError(
+                f"HeadConfig.bin_gradient must be one of {BIN_GRADIENTS}, got {self.bin_gradient!r}"
+            )
         p = self.feature_projection
         if isinstance(p, bool) or not isinstance(p, int) or not 0 <= p <= self.feature_dim:
             raise ConfigError(
@@ -189,6 +202,14 @@ class Head(nn.Module):
         self.projection.bias.copy_(bias)
 
 
+def bins_relu(raw: torch.Tensor, bin_gradient: str) -> torch.Tensor:
+    """ReLU of a Depth-Q-Net's raw bin outputs; with `bin_gradient` "straight_through", while a gradient
+    is taken, the gradient passes as if there were no ReLU (the values are the ReLU's, bit for bit)."""
+    if bin_gradient == "straight_through" and raw.requires_grad:
+        return raw + (F.relu(raw) - raw).detach()
+    return F.relu(raw)
+
+
 class DepthHead(Head):
     """Depth-Q-Net head: predicted depth bins at t+1, (B, n_bins), ≥ 0; with lookahead K > 1 at
     t+1 … t+K, (B, K, n_bins). Its output layer's bias starts at `output_bias`."""
@@ -199,7 +220,7 @@ class DepthHead(Head):
         nn.init.constant_(self.output.bias, config.output_bias)
 
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        bins = F.relu(self.output(self.hidden_features(feature, action)))
+        bins = bins_relu(self.output(self.hidden_features(feature, action)), self.config.bin_gradient)
         if self.config.form == "per_action":
             return torch.einsum("ba,bak->bk", anchor_weights(action.reshape(-1).to(bins.dtype)),
                                 bins.reshape(-1, len(ANCHORS), self.config.n_bins))
@@ -233,7 +254,7 @@ class DepthFirstHead(Head):
     def advance(self, bins: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """Current bins (B, n_bins) and actions (B,) → the next frame's bins (B, n_bins), ≥ 0."""
         action = action.reshape(-1, 1).to(bins.dtype) * self.config.action_scale
-        return F.relu(self.output["dynamics"](torch.cat([bins, action], dim=1)))
+        return bins_relu(self.output["dynamics"](torch.cat([bins, action], dim=1)), self.config.bin_gradient)
 
     def forward(self, feature: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         return self.advance(self.perceive(feature).clamp(min=0.0), action)

@@ -42,13 +42,14 @@ _LEGACY_DECISION_HZ = 4.0
 _ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
                 "head_form": "concat", "labels": "lidar", "average": 0.0}
 # HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
-# field (action_scale, lookahead, feature_projection, form, output_bias, in that order) or, for `form`,
-# at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33). These are
-# the defaults HeadConfig had then: the paper's head, the action unscaled, the output bias 0. Every
+# field (action_scale, lookahead, feature_projection, form, output_bias, bin_gradient, in that order) or,
+# for `form`, at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33).
+# These are the defaults HeadConfig had then, or the one behaviour there was: the paper's head, the action
+# unscaled, the output bias 0, the bins' ReLU passing its own gradient back. Every
 # record holds kind, feature_dim, hidden, n_bins and dropout (written by dataclasses.asdict from the
 # first checkpoint on).
 _ADDED_HEAD = {"action_scale": 1.0, "lookahead": 1, "feature_projection": 0, "form": "concat",
-               "output_bias": 0.0}
+               "output_bias": 0.0, "bin_gradient": "relu"}
 # Fields renamed within version 3 (old name → new), as a record written before the rename reads.
 _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 # TrainConfig's sample settings, which it held itself until #33 moved them into `samples`

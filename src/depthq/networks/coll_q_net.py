@@ -29,9 +29,10 @@ class CollQNet(Network):
     view = "collision"
     label_sources = ("lidar",)  # it learns from the bump, not from depth bins
     # Depth-Q-Net's settings (its lookahead, head form, bootstrap, depth loss, labels' source, bins'
-    # initial bias): a sweep variant that sets them trains each Coll-Q-Net once, under its own name.
+    # initial bias and gradient): a sweep variant that sets them trains each Coll-Q-Net once, under its
+    # own name.
     unused_settings = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
-                       "output_bias")
+                       "output_bias", "bin_gradient")
     metric = "cross_entropy"
     metric_title = "cross-entropy"
     loss_title = "cross-entropy"

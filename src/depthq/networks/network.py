@@ -95,6 +95,9 @@ class Network:
         if config.output_bias:
             raise ConfigError(f"HeadConfig.output_bias {config.output_bias}: a Depth-Q-Net's (its outputs "
                               f"are depth bins), not {self.title}'s")
+        if config.bin_gradient != "relu":
+            raise ConfigError(f"HeadConfig.bin_gradient {config.bin_gradient!r}: a Depth-Q-Net's (its "
+                              f"outputs are depth bins), not {self.title}'s")
 
     def build_head(self, config: HeadConfig) -> Head:
         """Its head of `config` (checked by `check_head`)."""

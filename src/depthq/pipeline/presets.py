@@ -23,12 +23,13 @@ NETS = ("depth", "coll")  # the paper's two networks, in its tables' order
 # default depends on its network (`lr`, `head_form`, `average`, `weights`: `TrainConfig`).
 TRAINING: dict[str, Any] = {
     "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": None, "rho": 0.95,
-    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "dropout": 0.0,
-    "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
+    "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "tune_stages": 0,
+    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
     "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": None,
-    "output_bias": 0.0, "bootstrap": 0.0, "mirror": False, "labels": "lidar", "samples.horizon": 5,
-    "samples.min_frames": 20, "samples.every_run_end": True, "samples.action_clip": 1.0,
-    "samples.action_lag": 0, "weights": None, "snapshots": (), "average": None, "precision": "fp32",
+    "output_bias": 0.0, "bin_gradient": "relu", "bootstrap": 0.0, "mirror": False, "labels": "lidar",
+    "samples.horizon": 5, "samples.min_frames": 20, "samples.every_run_end": True,
+    "samples.action_clip": 1.0, "samples.action_lag": 0, "weights": None, "snapshots": (), "average": None,
+    "precision": "fp32",
 }
 
 

@@ -110,19 +110,29 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
 
 
 def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
-    """Successes / mean distance of every seed: the spread that a mean (std) over 3 seeds hides."""
+    """Successes / mean distance of every seed: the spread that a mean (std) over 3 seeds hides; and a
+    net with depth bins' dead outputs per seed (`depthq.networks.dead_outputs`, from the offline metric)."""
     results = collect_results(out, sweep)
     rows = []
     for variant, n, row in _groups(sweep):
         for net in sweep.nets:
-            summaries = [r["summary"] for r in per_seed(results, net, n, variant)]
-            cells = [f"{s['successes']}/{s['distance_mean']:.1f}" for s in summaries]
+            evaluations = per_seed(results, net, n, variant)
+            cells = [f"{r['summary']['successes']}/{r['summary']['distance_mean']:.1f}" for r in evaluations]
             row[f"{get_network(net).label}: successes/m per seed"] = ", ".join(cells) or "–"
+            if get_network(net).view == "bins":
+                row[f"{get_network(net).label}: dead outputs per seed"] = _dead_cell(evaluations)
         published = paper_networks()
         cells = [f"{net.paper[n][1]}/{net.paper[n][0]}" for net in published if n in net.paper]
         row[f"paper {', '.join(network.label for network in published)} (mean)"] = ", ".join(cells or ["–"])
         rows.append(row)
     return rows
+
+
+def _dead_cell(evaluations: list[dict[str, Any]]) -> str:
+    """'dead/outputs' of each seed's evaluation ('?' where its offline metric was not measured)."""
+    cells = [f"{len(o['dead_outputs'])}/{o['outputs']}" if "dead_outputs" in (o := r.get("offline") or {})
+             else "?" for r in evaluations]
+    return ", ".join(cells) or "–"
 
 
 def reference_rows(out: Path, reaches_end: bool = False) -> list[dict[str, str]]:

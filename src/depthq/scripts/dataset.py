@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_arguments(stats, DataConfig)
     verify = actions.add_parser("verify", help="read every run file and check it against the manifest, "
                                 "every re-rendered run against its source, every feature cache against its "
-                                "checksum, and that the folder holds every run its collection config asks for")
+                                "checksum, and that the folder holds every run its collection config asks "
+                                "for")
     verify.add_argument("dir", type=Path, help="dataset folder")
     again = actions.add_parser(
         "rerender", help="add every collected run rendered again in other looks: the same poses, LiDAR, "

@@ -21,13 +21,16 @@ def _rates(text: str) -> tuple[float, ...]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hz", default="4", help="candidate decision rates, comma-separated, e.g. 10,5,4")
     p.add_argument("--parts", default="stats,oracle,dqn",
-                   help="some of stats, oracle, dqn, agreement (see depthq.evaluate.probe)")
+                   help="some of stats, oracle, dqn, agreement, dead (see depthq.evaluate.probe)")
     p.add_argument("--oracle", default="depth:1",
                    help="oracles of the oracle and agreement parts, comma-separated: depth:K[:RULE] (the "
                    "true bins 1..K frames ahead of each action held) or coll:K (a bump within K frames)")
     p.add_argument("--evals", default="",
                    help="evaluation folders (depthq evaluate's --out) for the agreement part, "
                    "comma-separated")
+    p.add_argument("--checkpoints", default="",
+                   help="checkpoint folders for the dead part (how many of a Depth-Q-Net's outputs are 0 "
+                   "for every validation frame and candidate action), comma-separated")
     p.add_argument("--predictions", action="store_true",
                    help="agreement: also re-predict a checkpoint's values at every step (renders each frame)")
     p.add_argument("--stats-runs", type=int, default=300, help="OU runs per rate for the statistics")
@@ -55,9 +58,10 @@ def run(args: argparse.Namespace) -> int:
     parts = tuple(args.parts.split(","))
     oracles = tuple(Oracle.parse(text) for text in args.oracle.split(","))
     evaluations = tuple(Path(text) for text in args.evals.split(",") if text)
+    checkpoints = tuple(Path(text) for text in args.checkpoints.split(",") if text)
     family = config_from_args(WorldConfig, args).family
     result = probe(_rates(args.hz), parts, args.out, args.stats_runs, args.runs, args.canyons, args.epochs,
-                   family, oracles, evaluations, args.predictions)
+                   family, oracles, evaluations, args.predictions, checkpoints)
     args.out.mkdir(parents=True, exist_ok=True)
     write_json(args.out / "probe.json", result)  # strict JSON, written atomically
     if "stats" in result:
@@ -71,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
               f"{row['decisive_steps']} decisive steps, {row['agreement_before_collision'] or 0:.0%}"
               f" in the last 2 s before its {row['collisions']} collisions ({row['collisions_with_pillar']} "
               f"with a pillar); {row['distance_to_collision_mean']:.2f} m to the first collision")
+    for row in result.get("dead", []):
+        print(f"{row['checkpoint']}: {row['text']}")
     for hz, s in result.get("dqn", {}).items():
         print(f"Depth-Q-Net on {args.runs} runs at {hz} Hz in {args.canyons}: {s['successes']}/{s['runs']}, "
               f"{s['distance_mean']:.2f} m")

@@ -13,7 +13,7 @@ from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.flags import CHOICES
 from depthq.nets.checkpoint import WEIGHTS
-from depthq.nets.heads import HEAD_FORMS, HeadConfig
+from depthq.nets.heads import BIN_GRADIENTS, HEAD_FORMS, HeadConfig
 from depthq.nets.losses import DEPTH_LOSSES
 from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
@@ -38,6 +38,7 @@ PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
 TrunkName = Literal[tuple(TRUNKS)]  # type: ignore[valid-type]
 DepthLoss = Literal[DEPTH_LOSSES]  # type: ignore[valid-type]
 HeadForm = Literal[HEAD_FORMS]  # type: ignore[valid-type]
+BinGradient = Literal[BIN_GRADIENTS]  # type: ignore[valid-type]
 LabelSource = Literal[LABEL_SOURCES]  # type: ignore[valid-type]
 Weights = Literal[WEIGHTS]  # type: ignore[valid-type]
 
@@ -134,6 +135,11 @@ class TrainConfig:
     # an output unit behind the final ReLU starts alive for every input, so none is dead (always 0, no
     # reading to the policy) from the initialisation on (docs/oracle_gap.md#dead-bins).
     output_bias: float = field(default=0.0, metadata=OMIT_DEFAULT)
+    # What Depth-Q-Net's output ReLU passes back in training (docs/design.md#dead-outputs): "relu" its
+    # own gradient (none below 0: a bin below 0 for every input stays 0, a dead output, no reading to
+    # the policy), "straight_through" the gradient as if there were no ReLU, so a bin below 0 where
+    # its target is near is pulled up. The values, and so acting, are the ReLU's either way.
+    bin_gradient: BinGradient = field(default="relu", metadata=OMIT_DEFAULT)
     # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
     # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
     # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
@@ -203,7 +209,7 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value < high:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
-        check_choices(self, "train")  # trunk, depth_loss, head_form, labels, weights, precision
+        check_choices(self, "train")  # trunk, depth_loss, head_form, bin_gradient, labels, weights, precision
         check_tune_stages(self.trunk, self.tune_stages)
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
@@ -276,7 +282,7 @@ class TrainConfig:
         return HeadConfig(self.model, TRUNKS[self.trunk].feature_dim, hidden=self.hidden,
                           dropout=self.dropout, action_scale=self.action_scale, lookahead=self.lookahead,
                           feature_projection=self.feature_projection, form=self.head_form,
-                          output_bias=self.output_bias)
+                          output_bias=self.output_bias, bin_gradient=self.bin_gradient)
 
     def _check_snapshots(self) -> None:
         if not isinstance(self.snapshots, tuple):

@@ -3,6 +3,9 @@ the training loss: absolute difference on the near bins (Depth-Q-Net) or binary 
 Training's validation re-run on the whole split, so it lives beside the trainer whose loss it takes;
 `depthq.evaluate` reports it with the online metrics.
 
+A Depth-Q-Net's dead outputs (`depthq.networks.dead_outputs`: 0 for every validation frame and candidate
+action) come with it: `dead_outputs` (their indices) of `outputs`.
+
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead) is measured on its first step,
 t+1, with the one-step loss: the quantity a one-step net's column holds, so a sweep over lookaheads
 compares like with like; `steps` adds each step's, over the samples where that step is valid.
@@ -25,9 +28,10 @@ import torch
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
-from depthq.nets.checkpoint import chosen_weights, dataset_record, weights_stem
+from depthq.nets.checkpoint import chosen_weights, dataset_record, policy_record, weights_stem
 from depthq.nets.trunk import preprocess
 from depthq.networks import get_network, load_qnet
+from depthq.networks.dead_outputs import candidates_of, dead_in, has_bins
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.trainer import loss_function
@@ -53,14 +57,20 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
     stem = weights_stem(chosen_weights(config, weights, Path(checkpoint)))
+    dead = {}
+    if has_bins(net):
+        candidates = candidates_of(net, policy_record(config).actions)
+        dead = {"dead_outputs": list(dead_in(net, features, candidates)),
+                "outputs": net.head.config.n_bins * lookahead}
     if lookahead == 1:
         loss, _ = loss_function(train_config)(outputs, targets)
-        return {"metric": network.metric, "value": float(loss), "samples": len(targets), "weights": stem}
+        return {"metric": network.metric, "value": float(loss), "samples": len(targets), "weights": stem,
+                **dead}
     one_step = loss_function(replace(train_config, lookahead=1))
     valid = torch.from_numpy(arrays["mask"])
     steps = [float(one_step(outputs[valid[:, k], k], targets[valid[:, k], k])[0]) for k in range(lookahead)]
     return {"metric": network.metric, "value": steps[0], "samples": len(targets), "weights": stem,
-            "steps": steps}
+            "steps": steps, **dead}
 
 
 def training_data(record: dict[str, Any], data: Path | None) -> Dataset | None:
