@@ -23,11 +23,11 @@ from typing import Any
 from depthq.configio import read_json, write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.networks.dead_outputs import count_dead_outputs
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.cells import mean_interval
 from depthq.sim.canyon import split_family
 from depthq.train.config import TrainConfig
+from depthq.train.dead_outputs import count_dead_outputs
 from depthq.train.trainer import train
 
 GRADIENTS = ("relu", "straight_through")

@@ -43,7 +43,6 @@ from depthq.errors import ConfigError, guarded
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
 from depthq.networks import get_network
-from depthq.networks.dead_outputs import count_dead_outputs, dead_outputs
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import (
@@ -55,6 +54,7 @@ from depthq.pipeline.sweep import (
 )
 from depthq.report.build import build_report
 from depthq.report.cells import mean_interval, ranks_driving
+from depthq.train.dead_outputs import count_dead_outputs, dead_outputs
 
 
 @dataclass(frozen=True)

@@ -45,10 +45,10 @@ from depthq.nets.checkpoint import (
     weights_stem,
 )
 from depthq.nets.heads import DepthFirstHead
-from depthq.networks.dead_outputs import dead_outputs, net_features, split_features
 from depthq.policies.qnet import QNetPolicy
 from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig
+from depthq.train.dead_outputs import dead_outputs, net_features, split_features
 
 PROG = "python -m research.weights_check"
 DEAD = 1e-6  # m: a bin predicted at or below this counts as no phantom reading

@@ -1,4 +1,4 @@
-"""Dead outputs (`depthq.networks.dead_outputs`): a Depth-Q-Net's bins that are 0 for every validation
+"""Dead outputs (`depthq.train.dead_outputs`): a Depth-Q-Net's bins that are 0 for every validation
 frame and candidate action, counted on trained toy nets, through `depthq probe --parts dead` and the
 offline metric; and the straight-through bin gradient, which keeps them alive."""
 
@@ -13,9 +13,9 @@ import pytest
 
 from depthq.cli import main
 from depthq.data.manifest import Dataset
-from depthq.networks.dead_outputs import count_dead_outputs, dead_outputs
 from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig
+from depthq.train.dead_outputs import count_dead_outputs, dead_outputs
 from depthq.train.offline_metric import offline_metric
 from depthq.train.trainer import train
 

@@ -14,7 +14,7 @@ Three parts, each on the `train` and `val` canyon streams only (the `eval` canyo
 - `dqn`: a small dataset collected at a rate, one Depth-Q-Net trained on it and driven in `val`
   canyons (at the data's rate): the end-to-end check, in a few minutes.
 - `dead`: for checkpoint folders, how many of a Depth-Q-Net's outputs are dead, 0 for every
-  validation frame and candidate action (`depthq.networks.dead_outputs`), from the feature cache.
+  validation frame and candidate action (`depthq.train.dead_outputs`), from the feature cache.
 """
 
 from __future__ import annotations
@@ -33,11 +33,11 @@ from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_agreement
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
-from depthq.networks.dead_outputs import count_dead_outputs
 from depthq.parallel import worker_context
 from depthq.progress import Bar
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
+from depthq.train.dead_outputs import count_dead_outputs
 from depthq.train.trainer import train
 
 PARTS = ("stats", "oracle", "dqn", "agreement", "dead")

@@ -111,7 +111,7 @@ def table1_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
 
 def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
     """Successes / mean distance of every seed: the spread that a mean (std) over 3 seeds hides; and a
-    net with depth bins' dead outputs per seed (`depthq.networks.dead_outputs`, from the offline metric)."""
+    net with depth bins' dead outputs per seed (`depthq.train.dead_outputs`, from the offline metric)."""
     results = collect_results(out, sweep)
     rows = []
     for variant, n, row in _groups(sweep):

@@ -3,7 +3,7 @@ the training loss: absolute difference on the near bins (Depth-Q-Net) or binary 
 Training's validation re-run on the whole split, so it lives beside the trainer whose loss it takes;
 `depthq.evaluate` reports it with the online metrics.
 
-A Depth-Q-Net's dead outputs (`depthq.networks.dead_outputs`: 0 for every validation frame and candidate
+A Depth-Q-Net's dead outputs (`depthq.train.dead_outputs`: 0 for every validation frame and candidate
 action) come with it: `dead_outputs` (their indices) of `outputs`.
 
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead) is measured on its first step,
@@ -31,8 +31,8 @@ from depthq.errors import ConfigError, DataError
 from depthq.nets.checkpoint import chosen_weights, dataset_record, policy_record, weights_stem
 from depthq.nets.trunk import preprocess
 from depthq.networks import get_network, load_qnet
-from depthq.networks.dead_outputs import candidates_of, dead_in, has_bins
 from depthq.train.config import TrainConfig
+from depthq.train.dead_outputs import candidates_of, dead_in, has_bins
 from depthq.train.features import load_features
 from depthq.train.trainer import loss_function
 
