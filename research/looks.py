@@ -36,9 +36,10 @@ from __future__ import annotations
 
 import argparse
 import html
+import io
 import json
 import sys
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,7 @@ from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
+from depthq.data.rerender import rerender
 from depthq.data.stats import error_cell, label_errors
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
@@ -84,6 +86,115 @@ BROAD_CANYONS = tuple(f"hard/val:{k}" for k in range(1000, 1004))
 POSE_STEPS = 8  # straight ahead for this many decisions, then one turning step (blur in the textured looks)
 TRAIN_LOOKS = (COLOURS, TEXTURED)
 DRIVE_LOOKS = (COLOURS, TEXTURED, HELDOUT)
+# A driving look of the experiment's own: a folder of images it generates (OUT/generated_look), drawn by
+# a generator no bank or look uses (random translucent polygons on a gradient), so no net saw it.
+GENERATED = "generated"
+GENERATED_IMAGES, GENERATED_SEED = 24, 4242
+RERENDER_SEED = 1  # the draw of every re-rendered look (`depthq dataset rerender --seed`)
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How a training look's nets learn (issue #57): the runs collected in `look`, each rendered again
+    in every look of `rerender` (`depthq dataset rerender`: the same poses, LiDAR and actions, new
+    frames), trained with `training` and labelled by a labeller with `labeller`, each over the pinned
+    settings. A look's name alone is today's recipe: that look, nothing more."""
+
+    look: str
+    rerender: tuple[str, ...] = ()
+    training: tuple[tuple[str, Any], ...] = ()
+    labeller: tuple[tuple[str, Any], ...] = ()
+
+
+_MANY = (COLOURS, TEXTURED)  # the looks a broad collection is rendered again in
+_TUNED, _BRIGHT = (("tune_stages", 1),), (("brightness", "affine"),)
+_LIVE = (*_TUNED, ("bin_gradient", "straight_through"))  # and no dead output
+# The recipes of issue #57, each the one before it and one more item: chosen among on `val` (`diagnose`).
+RECIPES: dict[str, Recipe] = {
+    "broad+looks": Recipe(BROAD, _MANY),
+    "broad+looks+tuned": Recipe(BROAD, _MANY, _TUNED),
+    "broad+looks+tuned+bright": Recipe(BROAD, _MANY, _TUNED, _BRIGHT),
+    "broad+looks+tuned+bright+st": Recipe(BROAD, _MANY, _LIVE, _BRIGHT),
+}
+
+
+def recipe(name: str) -> Recipe:
+    """The recipe `name` names: one of RECIPES, or a look's name (that look alone)."""
+    if name in RECIPES:
+        return RECIPES[name]
+    if name in LOOKS:
+        return Recipe(name)
+    raise ConfigError(f"unknown recipe {name!r}: a look ({', '.join(LOOKS)}) or one of {', '.join(RECIPES)}")
+
+
+def generated_look(out: Path) -> Path:
+    """OUT/generated_look: GENERATED_IMAGES images of random translucent polygons on a colour gradient,
+    made once (the same bytes on every machine: numpy's generator and Pillow's drawing)."""
+    folder = Path(out) / "generated_look"
+    names = [f"generated_{k:02d}.png" for k in range(GENERATED_IMAGES)]
+    if all((folder / name).is_file() for name in names):
+        return folder
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(GENERATED_SEED)
+    for name in names:
+        size = 256
+        ramp = np.linspace(0.0, 1.0, size)[:, None, None]
+        top, bottom = rng.uniform(0, 255, 3), rng.uniform(0, 255, 3)
+        base = (top * (1 - ramp) + bottom * ramp) * np.ones((1, size, 1))
+        image = Image.fromarray(base.astype(np.uint8)).convert("RGBA")
+        layer = Image.new("RGBA", image.size)
+        draw = ImageDraw.Draw(layer)
+        for _ in range(int(rng.integers(20, 60))):
+            corners = int(rng.integers(3, 6))
+            centre, radius = rng.uniform(0, size, 2), rng.uniform(8, 80)
+            angles = np.sort(rng.uniform(0, 2 * np.pi, corners))
+            points = [(float(centre[0] + radius * np.cos(a)), float(centre[1] + radius * np.sin(a)))
+                      for a in angles]
+            colour = (*(int(c) for c in rng.integers(0, 256, 3)), int(rng.integers(90, 230)))
+            draw.polygon(points, fill=colour)
+        image = Image.alpha_composite(image, layer).convert("RGB")
+        buffer = io.BytesIO()
+        image.save(buffer, format="PNG")
+        atomic_write_bytes(folder / name, buffer.getvalue())
+    return folder
+
+
+def look_of(out: Path, key: str) -> str:
+    """The look a driving look's key names: GENERATED is OUT's generated folder, any other key a look."""
+    if key == GENERATED:
+        return str(generated_look(out))
+    check_look(key)
+    return key
+
+
+def check_drive_looks(keys: tuple[str, ...]) -> None:
+    """A ConfigError naming the first driving look that is neither a look nor GENERATED."""
+    for key in keys:
+        if key != GENERATED:
+            check_look(key)
+
+
+def prepare_data(out: Path, name: str, sweep: Sweep, workers: int, progress: bool) -> None:
+    """A recipe's dataset before its sweep: with re-rendered looks, the sweep's collection (as the sweep
+    would make it) and its runs rendered again in each; the first recipe of the same collection and
+    looks makes it, the others link to it (resumed)."""
+    wanted = recipe(name)
+    if not wanted.rerender:
+        return
+    data = out / name / "sweep" / "data"
+    twin = next(other for other in RECIPES if (recipe(other).look, recipe(other).rerender) ==
+                (wanted.look, wanted.rerender))
+    if twin != name:
+        data.parent.mkdir(parents=True, exist_ok=True)
+        if not data.exists():
+            data.symlink_to(out / twin / "sweep" / "data")
+        prepare_data(out, twin, sweep, workers, progress)
+        return
+    if not collection_complete(data, sweep.collect):
+        print(f"collect in the {wanted.look} look → {data}", flush=True)
+        collect(data, sweep.collect, workers=workers, progress=progress)
+    print(f"rerender {data} in {', '.join(wanted.rerender)}", flush=True)
+    rerender(data, wanted.rerender, seed=RERENDER_SEED, workers=workers, progress=progress)
 CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment make their choices
 NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
 # The labellers are measured in every driving look on OUT/val_<look>/data: VAL_RUNS validation runs (in
@@ -259,7 +370,7 @@ def measure_labellers(out: Path, preset: str, train_looks: tuple[str, ...], driv
     labeller measured on it, its runs decoded once for them all (resumed: a finished collection or
     measurement is kept)."""
     for drive in drive_looks:
-        data, config = Path(out) / f"val_{drive}" / "data", val_collect(preset, drive, val_runs)
+        data, config = Path(out) / f"val_{drive}" / "data", val_collect(preset, look_of(out, drive), val_runs)
         if not collection_complete(data, config):
             print(f"validation runs in the {drive} look → {data}", flush=True)
             collect(data, config, workers=workers, progress=progress)
@@ -324,37 +435,46 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         drive_looks: tuple[str, ...] = DRIVE_LOOKS, method: str = "monodepth",
         time_limit_s: float | None = None,
         labeller_settings: tuple[tuple[str, Any], ...] = (), training: tuple[tuple[str, Any], ...] = (),
-        val_runs: int = VAL_RUNS, workers: int = 2, device: str = "auto", progress: bool = True) -> int:
-    """The experiment into OUT (resumed); then its tables."""
+        val_runs: int = VAL_RUNS, workers: int = 2, device: str = "auto", progress: bool = True,
+        train_only: bool = False) -> int:
+    """The experiment into OUT (resumed): per recipe (`train_looks`: recipes' or looks' names) its
+    sweep and camera labels, trained with their choices on `choose`; unless `train_only`, every net
+    driven in each driving look in `canyons`, the labellers and predictions measured; then its tables."""
     out = Path(out).resolve()
-    for look in (*train_looks, *drive_looks):
-        check_look(look)
-    driving = EvalConfig(canyons=parse_canyon_set(canyons), time_limit_s=time_limit_s)  # checked up front
+    recipes = {name: recipe(name) for name in train_looks}  # checked up front, as the rest
+    check_drive_looks(drive_looks)
+    driving = EvalConfig(canyons=parse_canyon_set(canyons), time_limit_s=time_limit_s)
     if val_runs < 1:
         raise ConfigError(f"--val-runs must be >= 1, got {val_runs}")
-    for look in train_looks:
-        sweep = retarget(get_preset(preset), family="hard", canyons=choose, look=look)
+    for name, made in recipes.items():
+        sweep = retarget(get_preset(preset), family="hard", canyons=choose, look=made.look)
         if time_limit_s is not None:
             limit = {**dict(sweep.evaluate), "time_limit_s": time_limit_s}
             sweep = replace(sweep, evaluate=tuple(limit.items()))
-        sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset} in the {look} look")
-        pinned = pinned_training(sweep, runs, seeds[0], training, preset)
+        sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset}, recipe {name}")
+        pinned = pinned_training(sweep, runs, seeds[0], (*made.training, *training), preset)
         sweep = replace(sweep, train=tuple({**dict(sweep.train), **dict(pinned)}.items()))
-        print(f"sweep in the {look} look → {out / look / 'sweep'}", flush=True)
-        run_sweep(sweep, out / look / "sweep", progress=progress, device=device, finish=build_report)
-        camera_labels.run(out / look / "sweep", out / look / "camera", method, runs=runs, seeds=seeds,
-                          canyons=choose, time_limit_s=time_limit_s, look=look,
-                          labeller_settings=pinned_labeller(method, labeller_settings),
+        prepare_data(out, name, sweep, workers, progress)
+        print(f"sweep of recipe {name} → {out / name / 'sweep'}", flush=True)
+        run_sweep(sweep, out / name / "sweep", progress=progress, device=device, finish=build_report)
+        camera_labels.run(out / name / "sweep", out / name / "camera", method, runs=runs, seeds=seeds,
+                          canyons=choose, time_limit_s=time_limit_s, look=made.look,
+                          labeller_settings=pinned_labeller(method, (*made.labeller, *labeller_settings)),
                           training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
                           workers=workers,
                           device=device, progress=progress)
+        if train_only:
+            continue
         for drive in drive_looks:
-            config = replace(driving, look=drive)
+            config = replace(driving, look=look_of(out, drive))
             for seed in seeds:
-                for net, checkpoint in checkpoints(out, look, runs, seed, method).items():
+                for net, checkpoint in checkpoints(out, name, runs, seed, method).items():
                     if (checkpoint / CONFIG).is_file():
-                        _drive(checkpoint, out / look / f"eval_{drive}" / f"{net}_s{seed}", config,
+                        _drive(checkpoint, out / name / f"eval_{drive}" / f"{net}_s{seed}", config,
                                workers, progress, device)
+    if train_only:
+        print(f"trained: {', '.join(recipes)}; choose among them with `{PROG} diagnose` on `val`")
+        return 0
     measure_labellers(out, preset, train_looks, drive_looks, method, val_runs, workers, progress)
     measure_predictions(out, runs, seeds, train_looks, drive_looks, method)
     print(table(out, runs, seeds, train_looks, drive_looks, method))
@@ -381,8 +501,9 @@ def diagnose(out: Path, *, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
     (`depthq.evaluate.oracle.agreement`): how often it took the best action, and how far its scores
     are from the true ones, on the states it reached (resumed)."""
     out = Path(out).resolve()
-    for look in (*train_looks, *drive_looks):
-        check_look(look)
+    for name in train_looks:
+        recipe(name)
+    check_drive_looks(drive_looks)
     unknown = sorted(set(nets) - set(NETS))
     if unknown:
         raise ConfigError(f"--nets {','.join(unknown)}: not a net of this experiment ({', '.join(NETS)})")
@@ -396,7 +517,8 @@ def diagnose(out: Path, *, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
                     folder = where / f"{net}_s{seed}"
                     if net not in nets or not (checkpoint / CONFIG).is_file():
                         continue
-                    _drive(checkpoint, folder, replace(driving, look=drive), workers, progress, device)
+                    _drive(checkpoint, folder, replace(driving, look=look_of(out, drive)), workers, progress,
+                           device)
                     path = agreement_file(where, folder.name, oracle, ".json")
                     weights = read_json(folder / "summary.json")["policy"]["weights"]
                     if path.is_file() and read_checked_json(path, FIX)["weights"] == weights:
@@ -703,8 +825,12 @@ def main(argv: list[str] | None = None) -> int:
     common.add_argument("out", type=Path, help="the experiment's folder (created; resumed)")
     common.add_argument("--runs", type=int, default=500, help="training runs of every Q-net (default: 500)")
     common.add_argument("--seeds", default="0-2", help="training seeds (default: 0-2)")
-    common.add_argument("--train-looks", default=",".join(TRAIN_LOOKS), help="looks the nets learn in")
-    common.add_argument("--drive-looks", default=",".join(DRIVE_LOOKS), help="looks every net drives in")
+    common.add_argument("--train-looks", default=",".join(TRAIN_LOOKS),
+                        help=f"recipes the nets learn by: a look's name (that look alone) or one of "
+                             f"{', '.join(RECIPES)}")
+    common.add_argument("--drive-looks", default=",".join(DRIVE_LOOKS),
+                        help=f"looks every net drives in (`{GENERATED}`: a folder of images the experiment "
+                             "generates, seen by no net)")
     common.add_argument("--method", default=PINNED_METHOD,
                         help=f"the camera labeller (default: {PINNED_METHOD})")
     go = actions.add_parser("run", parents=[common], help="sweeps, camera labels, evaluations (resumed)")
@@ -721,6 +847,8 @@ def main(argv: list[str] | None = None) -> int:
     go.add_argument("--workers", type=int, default=2, help="processes per evaluation (default: 2)")
     go.add_argument("--device", default="auto", help="torch device (default: auto)")
     go.add_argument("--no-progress", action="store_true", help="no progress bars")
+    go.add_argument("--train-only", action="store_true",
+                    help="train every recipe, drive nothing in --canyons (choose first, with diagnose)")
     why = actions.add_parser("diagnose", parents=[common],
                              help="the nets driven in the choice canyons of each look, their actions "
                                   "and scores checked against the depth oracle's along their runs (resumed)")
@@ -765,8 +893,8 @@ def main(argv: list[str] | None = None) -> int:
                    time_limit_s=args.time_limit,
                    labeller_settings=camera_labels.parse_settings(args.labeller_set, "--labeller-set"),
                    training=camera_labels.parse_settings(args.set, "--set"), val_runs=args.val_runs,
-                   workers=args.workers,
-                   device=args.device, progress=not args.no_progress)
+                   workers=args.workers, device=args.device, progress=not args.no_progress,
+                   train_only=args.train_only)
 
     return guarded(PROG, work)
 

@@ -108,7 +108,8 @@ def test_user_docs_commands_run_as_written(tmp_path: Path, monkeypatch: pytest.M
         assert main([*argv, *TOY.get(verb, [])]) == 0, argv
     for written in ("runs/dqn/config.json", "runs/dqn-eval/summary.json", "runs/dqn-camera/config.json",
                     "runs/robot-dqn/config.json", "runs/onnx", "runs/dqn-heldout/summary.json",
-                    "runs/dqn-look/summary.json", "runs/lab-data/manifest.json", "runs/dqn-lab/summary.json"):
+                    "runs/dqn-look/summary.json", "runs/lab-data/manifest.json", "runs/dqn-lab/summary.json",
+                    "runs/dqn-world/config.json", "runs/dqn-world-heldout/summary.json"):
         assert (tmp_path / written).exists(), written
     assert any((tmp_path / "runs/drive").iterdir())
 

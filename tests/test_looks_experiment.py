@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from depthq.data.manifest import Dataset
+from depthq.data.rerender import STRIDE, rendered_looks
 from depthq.lock import exclusive
 from research import looks
 
@@ -144,3 +145,29 @@ def test_the_looks_experiment_trains_with_its_pinned_configs() -> None:
     apart = widened(sweep, train=(*sweep.train, ("average", 0.5)))  # pinned 0.25 and 0.0
     with pytest.raises(ConfigError, match="pinned average differently for depth"):
         looks.pinned_training(apart, 500, 0, ())
+
+
+@pytest.mark.slow  # a toy collection rendered again in two looks, two sweeps, labellers, a diagnosis: ~4 min
+def test_a_recipe_renders_its_runs_again_shares_them_and_drives_a_generated_look(tmp_path: Path, capsys):
+    """#57's recipes: `broad+looks` collects in the broad look and renders every run again in the colour
+    and the textured look before its sweep; a second recipe of the same data links it; `--train-only`
+    drives nothing in the table's canyons; `diagnose` drives the net in the generated folder look."""
+    out = tmp_path / "recipes"
+    toy = [a if a != "textured" else "broad+looks,broad+looks+tuned" for a in TOY]
+    toy = [a if a != "heldout" else looks.GENERATED for a in toy]
+    assert looks.main(["run", str(out), *toy, "--train-only"]) == 0
+    data = Dataset.open(out / "broad+looks" / "sweep" / "data")
+    assert sorted(look for look, _ in rendered_looks(data).values()) == ["colours", "textured"]
+    collected = [e for e in data.entries("train") if e.index < STRIDE]
+    assert len(collected) >= 3 and len(data.entries("train")) == 3 * len(collected)  # each in 3 looks
+    twin = out / "broad+looks+tuned" / "sweep" / "data"
+    assert twin.is_symlink() and twin.resolve() == (out / "broad+looks" / "sweep" / "data").resolve()
+    assert not list(out.glob("*/eval_*")) and "choose among them" in capsys.readouterr().out
+    why = ["diagnose", str(out), "--runs", "3", "--seeds", "0", "--train-looks", "broad+looks",
+           "--drive-looks", looks.GENERATED, "--nets", "depth", "--choose", "hard/val:1000",
+           "--method", "floor", "--time-limit", "2", "--workers", "1", "--device", "cpu", "--no-progress"]
+    assert looks.main(why) == 0
+    images = sorted((out / "generated_look").glob("*.png"))
+    assert len(images) == looks.GENERATED_IMAGES
+    driven = out / "broad+looks" / "diagnose_generated" / "depth_s0" / "summary.json"
+    assert json.loads(driven.read_text())["config"]["look"] == str(out.resolve() / "generated_look")
