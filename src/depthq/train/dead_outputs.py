@@ -68,7 +68,7 @@ def dead_in(net: QNet, features: torch.Tensor, candidates: torch.Tensor) -> tupl
     frames at a time: an output alive in any chunk is alive."""
     alive = None
     for chunk in features.split(CHUNK_FRAMES):
-        values = net.candidate_outputs(net_features(net, chunk.float()), candidates)
+        values = net.candidate_outputs(chunk.float(), candidates)
         above = (values.reshape(-1, values[0, 0].numel()) > 0).any(dim=0)
         alive = above if alive is None else alive | above
     if alive is None:
@@ -111,7 +111,7 @@ def count_dead_outputs(
     net, record = load_qnet(Path(folder), weights=weights)
     if not has_bins(net):
         return None
-    features = split_features(folder, split, frames)
+    features = net_features(net, split_features(folder, split, frames))
     candidates = candidates_of(net, policy_record(record).actions)
     outputs = net.head.config.n_bins * net.head.config.lookahead
     return DeadOutputs(dead_in(net, features, candidates), outputs, len(features), split, len(candidates))
