@@ -125,6 +125,10 @@ def test_a_tuned_training_stores_its_late_stages_reloads_resumes_and_acts_as_tra
     policy = QNetPolicy.from_checkpoint(out, weights="last")
     np.testing.assert_allclose(policy.values(frame), trained_values.numpy(), atol=2e-2, rtol=1e-2)
 
+    from depthq.train.offline_metric import offline_metric  # on the cached activations
+
+    metric = offline_metric(out, dataset, weights="last")
+    assert metric["samples"] > 0 and np.isfinite(metric["value"])
     from depthq.experiments.weights_check import measure  # its dead outputs, with each choice's stages
 
     checked = measure(out, ("final", "average"), frames=12)

@@ -197,7 +197,6 @@ def build_trunk(name: str, pretrained: bool = True, tune_stages: int = 0) -> Tru
 # --- a trunk tuned from cached activations (docs/design.md#tuned-trunk) ------------------------------
 
 STAGES = len(LITE0_STAGES)  # EfficientNet-Lite0's MBConv stages
-STEM_CHANNELS = 32
 
 
 def check_tune_stages(trunk: str, tune_stages: object) -> None:
@@ -215,9 +214,10 @@ def early_map_shape(frozen_stages: int, size: int) -> tuple[int, int, int]:
     """(channels, side, side) of the map after EfficientNet-Lite0's stem and first `frozen_stages`
     stages, on size × size images: what the activation cache holds per frame."""
     side = size
-    for stride in (2, *(s.stride for s in LITE0_STAGES[:frozen_stages])):
+    for stride in (2, *(s.stride for s in LITE0_STAGES[:frozen_stages])):  # the stem's, then the stages'
         side = -(-side // stride)  # TensorFlow "SAME": ceil(side / stride)
-    channels = LITE0_STAGES[frozen_stages - 1].out_ch if frozen_stages else STEM_CHANNELS
+    stem = LITE0_STAGES[0].in_ch
+    channels = LITE0_STAGES[frozen_stages - 1].out_ch if frozen_stages else stem
     return channels, side, side
 
 

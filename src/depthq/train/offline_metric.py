@@ -33,7 +33,7 @@ from depthq.nets.trunk import preprocess
 from depthq.networks import get_network, load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import candidates_of, dead_in, has_bins
-from depthq.train.features import load_features
+from depthq.train.features import load_activations, load_features
 from depthq.train.trainer import loss_function
 
 
@@ -53,6 +53,9 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     size = int(train["input_size"])
     if net.trunk.frozen:
         features = load_features(dataset, train["trunk"], size, progress=False).gather("val", arrays).float()
+    elif train_config.tune_stages:  # its late stages on its frozen stages' cached activations
+        table = load_activations(dataset, train_config.tune_stages, size, progress=False)
+        features = net.trunk.late_features(table.gather("val", arrays).float())
     else:  # the trunk was trained with the head: run it on the frames themselves
         features = torch.cat([net.trunk(preprocess(frames, size)) for frames in _frames(dataset, arrays)])
     outputs = net.head(features, actions)
