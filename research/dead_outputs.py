@@ -8,8 +8,9 @@ the default budget, their dead outputs counted on its validation frames, each dr
 
 `run` trains (or resumes) one model per gradient and seed into OUT/models, counts its dead outputs and
 drives it (OUT/eval, skipped where a summary exists), seed-major so a partial run has whole rows;
-OUT/results.json keeps what is measured. `table` prints the Markdown table. The `eval` canyons are
-refused. A research script (research/, not in the wheel; run from a checkout's root).
+OUT/results.json keeps what is measured (runs of other seeds may share OUT at once). `table` prints
+the Markdown table. The `eval` canyons are refused. A research script (research/, not in the wheel;
+run from a checkout's root).
 """
 
 from __future__ import annotations
@@ -67,7 +68,8 @@ def run(data: Path, out: Path, seeds: tuple[int, ...], runs: int, canyons: str, 
                        val_loss=summary.get("offline", {}).get("value"))
             print(f"{name}: {s['distance_to_collision_mean']:.2f} m to the first collision, "
                   f"{s['reached_end']} ends", flush=True)
-            results[name] = row
+            # merged with the file as it is now: a run of other seeds may share OUT
+            results = {**(read_json(path) if path.is_file() else {}), name: row}
             write_json(path, results)
     print(table(out))
     return 0
