@@ -8,7 +8,8 @@ the default budget, their dead outputs counted on its validation frames, each dr
 
 `run` trains (or resumes) one model per gradient and seed into OUT/models, counts its dead outputs and
 drives it (OUT/eval, skipped where a summary exists), seed-major so a partial run has whole rows;
-OUT/results.json keeps what is measured (runs of other seeds may share OUT at once). `table` prints
+OUT/results.json keeps what is measured (runs of other seeds may share OUT, but not a seed: two
+trainings in one model folder at once collide). `table` prints
 the Markdown table. The `eval` canyons are refused. A research script (research/, not in the wheel;
 run from a checkout's root).
 """
@@ -17,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -50,11 +50,9 @@ def run(data: Path, out: Path, seeds: tuple[int, ...], runs: int, canyons: str, 
         for gradient in gradients:
             name = name_of(gradient, runs, seed)
             folder = out / "models" / name
-            start = time.perf_counter()
             train(TrainConfig(model="depth", data=str(data), runs=runs, seed=seed, bin_gradient=gradient),
                   folder, progress=False)
             row = {**results.get(name, {}), "gradient": gradient, "seed": seed, "runs": runs}
-            row.setdefault("train_s", round(time.perf_counter() - start, 1))
             found = count_dead_outputs(folder)
             row.update(dead=list(found.dead), outputs=found.outputs, frames=found.frames)
             print(f"{name}: {found}", flush=True)
