@@ -198,6 +198,7 @@ def test_bad_tune_stages_are_refused_by_name(tmp_path: Path, capsys: pytest.Capt
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_bench_train_times_a_tuned_trunk_beside_the_head(capsys: pytest.CaptureFixture[str]) -> None:
     from depthq.bench.train import bench_train
 
