@@ -129,7 +129,7 @@ def test_a_tuned_training_stores_its_late_stages_reloads_resumes_and_acts_as_tra
 
     metric = offline_metric(out, dataset, weights="last")
     assert metric["samples"] > 0 and np.isfinite(metric["value"])
-    from depthq.experiments.weights_check import measure  # its dead outputs, with each choice's stages
+    from research.weights_check import measure  # its dead outputs, with each choice's stages
 
     checked = measure(out, ("final", "average"), frames=12)
     assert checked["final"]["frames"] == 12 and isinstance(checked["average"]["dead_bins"], list)
