@@ -105,16 +105,17 @@ def run_drive_node(
     def watch_once() -> None:
         now, wall = rospy.get_time(), time.monotonic()
         last, last_wall = clock["ros"], clock["wall"]
-        if last is not None and now < last - 1e-3:
+        clock["ros"], clock["wall"] = now, wall
+        jumps = core.stats.clock_jumps
+        with lock:
+            command = core.watch(now)  # the core tells a jump back (it drops the old clock's frames)
+            if command is not None:
+                publish(command)
+        if core.stats.clock_jumps > jumps:
             rospy.logwarn("the clock jumped back from %.3f to %.3f s: everything stamped before is dropped",
                           last, now)
         elif last is not None and now - last > wall - last_wall + FORWARD_JUMP_S:
             rospy.logwarn("the clock jumped forward from %.3f to %.3f s", last, now)
-        clock["ros"], clock["wall"] = now, wall
-        with lock:
-            command = core.watch(now)
-            if command is not None:
-                publish(command)
 
     said: dict[str, float] = {}
 
