@@ -162,6 +162,10 @@ def test_a_recipe_renders_its_runs_again_shares_them_and_drives_a_generated_look
     assert len(collected) >= 3 and len(data.entries("train")) == 3 * len(collected)  # each in 3 looks
     twin = out / "broad+looks+tuned" / "sweep" / "data"
     assert twin.is_symlink() and twin.resolve() == (out / "broad+looks" / "sweep" / "data").resolve()
+    for part in ("labeller", "data"):  # the same data and labeller settings: one labeller, learnt once
+        shared, first = (out / recipe / "camera" / "floor" / part
+                         for recipe in ("broad+looks+tuned", "broad+looks"))
+        assert shared.is_symlink() and shared.resolve() == first.resolve()
     assert not list(out.glob("*/eval_*")) and "choose among them" in capsys.readouterr().out
     why = ["diagnose", str(out), "--runs", "3", "--seeds", "0", "--train-looks", "broad+looks",
            "--drive-looks", looks.GENERATED, "--nets", "depth", "--choose", "hard/val:1000",
