@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from depthq.blocks.checkpoint import CONFIG, read_config
 from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, from_dict, read_json, to_dict, write_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
@@ -63,7 +64,6 @@ from depthq.labellers.labeller import (
     train_labeller,
 )
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
-from depthq.nets.checkpoint import CONFIG, read_config
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.sweep import parse_ints, parse_setting
 from depthq.report.cells import mean_interval

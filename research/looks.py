@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
+from depthq.blocks.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
@@ -60,7 +61,6 @@ from depthq.flags import build_config
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
 from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
 from depthq.lock import exclusive
-from depthq.nets.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from depthq.blocks.checkpoint import dataset_record, read_config
 from depthq.data.manifest import Dataset
-from depthq.nets.checkpoint import dataset_record, read_config
 from depthq.networks import get_network
 from depthq.policies.qnet import QNetPolicy
 

@@ -29,6 +29,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from depthq.blocks.heads import HeadConfig
+from depthq.blocks.optim import make_optimizer
+from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
@@ -36,9 +39,6 @@ from depthq.data.views import run_then_frame, view_arrays
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
 from depthq.evaluate.oracle import env_config
-from depthq.nets.heads import HeadConfig
-from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.networks import build_head, get_network
 from depthq.sim.env import COLLISIONS, CanyonEnv
 from depthq.train.config import TrainConfig

@@ -28,11 +28,11 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from depthq.blocks.checkpoint import dataset_record, read_config
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluation_done
 from depthq.lock import exclusive
-from depthq.nets.checkpoint import dataset_record, read_config
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import Sweep, retarget, widened

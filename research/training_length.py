@@ -36,12 +36,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import torch
 
-from depthq.configio import atomic_write_bytes, read_json, write_json
-from depthq.errors import ConfigError, guarded
-from depthq.evaluate.online import evaluate
-from depthq.evaluate.oracle import Oracle
-from depthq.evaluate.probe import measure_agreement
-from depthq.nets.checkpoint import (
+from depthq.blocks.checkpoint import (
     chosen_weights,
     read_config,
     read_sidecar,
@@ -51,6 +46,11 @@ from depthq.nets.checkpoint import (
     weights_stem,
     write_sidecar,
 )
+from depthq.configio import atomic_write_bytes, read_json, write_json
+from depthq.errors import ConfigError, guarded
+from depthq.evaluate.online import evaluate
+from depthq.evaluate.oracle import Oracle
+from depthq.evaluate.probe import measure_agreement
 from depthq.pipeline.runner import run_sweep
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.build import build_report

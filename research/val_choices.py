@@ -21,9 +21,9 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from depthq.blocks.checkpoint import read_sidecar
 from depthq.configio import read_json
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.nets.checkpoint import read_sidecar
 from depthq.train.config import TrainConfig
 from depthq.train.folder import epoch_seconds
 from depthq.train.trainer import train

@@ -32,11 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from depthq.configio import write_json
-from depthq.errors import ConfigError, guarded
-from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.lock import exclusive
-from depthq.nets.checkpoint import (
+from depthq.blocks.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_margin,
     chosen_weights,
@@ -44,7 +40,11 @@ from depthq.nets.checkpoint import (
     read_config,
     weights_stem,
 )
-from depthq.nets.heads import DepthFirstHead
+from depthq.blocks.heads import DepthFirstHead
+from depthq.configio import write_json
+from depthq.errors import ConfigError, guarded
+from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.lock import exclusive
 from depthq.policies.qnet import QNetPolicy
 from depthq.report.tables import markdown
 from depthq.sim.sensors import LidarConfig

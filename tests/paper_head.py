@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from depthq.nets.heads import HeadConfig
+from depthq.blocks.heads import HeadConfig
 
 # FC 4096, dropout 0.5, the raw action appended, one step, the feature unprojected: what HeadConfig's
 # defaults were, and what a checkpoint record without the later fields reads as.

@@ -15,6 +15,7 @@ import pytest
 from conftest import unchecked
 from safetensors.torch import load_file
 
+from depthq.blocks.checkpoint import read_config
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.runfile import file_sha256, write_labelled
@@ -28,7 +29,6 @@ from depthq.labellers.labeller import (
     load_labeller,
     train_labeller,
 )
-from depthq.nets.checkpoint import read_config
 from depthq.train.config import TrainConfig
 
 TOY_LABELLER = {"method": "perception", "hidden": 64, "steps": 40, "batch_size": 16, "lr": 1.0,

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from depthq.blocks.checkpoint import read_config
 from depthq.data.manifest import Dataset
-from depthq.nets.checkpoint import read_config
 from research import camera_labels, label_bands
 
 TOY = [

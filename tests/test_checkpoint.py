@@ -14,13 +14,13 @@ import torch
 from conftest import unchecked
 from safetensors.torch import load_file
 
+from depthq.blocks.checkpoint import FORMAT_VERSION, read_config
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, at_policy_rate, default_canyons, evaluate
-from depthq.nets.checkpoint import FORMAT_VERSION, read_config
 from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ

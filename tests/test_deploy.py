@@ -14,13 +14,13 @@ import torch
 from conftest import assert_video
 from PIL import Image
 
+from depthq.blocks.trunk import preprocess
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.deploy.onnx_export import FrameResize, export_onnx
 from depthq.deploy.robot import LINEAR_SPEED, decode_frame, twist_for_frame
 from depthq.errors import ConfigError, DataError
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-from depthq.nets.trunk import preprocess
 from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.qnet import QNetPolicy
 

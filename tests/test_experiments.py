@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from depthq.blocks.checkpoint import read_weights
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import read_weights
 from research import oracle_gap, privileged, training_length
 
 

@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from depthq.blocks.checkpoint import weights_bytes
 from depthq.configio import atomic_write_bytes, temp_sibling, umask, write_json
 from depthq.data.recorder import CollectConfig, collect
 from depthq.data.rosbag import ImportConfig, export_bag, import_bag
-from depthq.nets.checkpoint import weights_bytes
 
 
 @pytest.fixture(params=[0o022, 0o077], ids=["umask022", "umask077"])

@@ -136,12 +136,12 @@ def test_train_help_lists_the_choices_of_every_choice_valued_flag(capsys: pytest
     """Each choice-valued setting is a Literal whose choices come from what owns them (the trunks'
     registry, the losses, the head forms, ...): --help lists them, and a value outside them is refused
     by name, exit 2, on the command line as in a config built otherwise."""
+    from depthq.blocks.checkpoint import WEIGHTS
+    from depthq.blocks.heads import HEAD_FORMS
+    from depthq.blocks.losses import DEPTH_LOSSES
+    from depthq.blocks.trunk import TRUNKS
     from depthq.cli import main
     from depthq.errors import ConfigError
-    from depthq.nets.checkpoint import WEIGHTS
-    from depthq.nets.heads import HEAD_FORMS
-    from depthq.nets.losses import DEPTH_LOSSES
-    from depthq.nets.trunk import TRUNKS
     from depthq.train.config import PRECISIONS, TrainConfig
 
     with pytest.raises(SystemExit):
@@ -319,10 +319,10 @@ def test_no_setting_is_declared_twice() -> None:
     none of their fields is a field of the sweep (its `canyons` is the canyon set evaluate's --canyons
     takes, which EvalConfig holds as the canyons it names). HeadConfig has no default for a setting
     TrainConfig holds (a second default could disagree), and `TrainConfig.head` passes each on."""
+    from depthq.blocks.heads import HeadConfig
     from depthq.data.recorder import CollectConfig
     from depthq.data.samples import SampleConfig
     from depthq.evaluate.online import EvalConfig
-    from depthq.nets.heads import HeadConfig
     from depthq.pipeline.sweep import Sweep
     from depthq.train.config import TrainConfig
 

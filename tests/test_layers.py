@@ -77,7 +77,7 @@ def _imports(module: str, top_level_only: bool = False) -> set[str]:
 
 
 def _folder(module: str) -> str:
-    """The folder (or base module) a module is in: `depthq.nets.heads` → nets."""
+    """The folder (or base module) a module is in: `depthq.blocks.heads` → blocks."""
     return module.split(".")[1]
 
 

@@ -16,14 +16,14 @@ import pytest
 import torch
 from paper_head import paper_head
 
+from depthq.blocks.heads import QNet
+from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.cli import main
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import BatchPolicy
 from depthq.evaluate.lockstep import Lane, drive_lockstep, lane_policies
 from depthq.evaluate.online import EvalConfig, drive, evaluate, parse_canyon_set, shares
-from depthq.nets.heads import QNet
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.networks import build_head, get_network
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.sim.env import CanyonEnv

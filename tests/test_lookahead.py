@@ -19,6 +19,7 @@ from conftest import unchecked
 from paper_head import paper_head
 from torch import nn
 
+from depthq.blocks.losses import depth_l1_loss, lookahead_l1_loss
 from depthq.control.action_selection import (
     ACTIONS,
     Selection,
@@ -32,7 +33,6 @@ from depthq.data.manifest import Dataset
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.nets.losses import depth_l1_loss, lookahead_l1_loss
 from depthq.networks import build_head, get_network
 from depthq.train.config import TrainConfig
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
+from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from depthq.train.samples import FeatureSamples

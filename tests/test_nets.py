@@ -14,14 +14,14 @@ import torch
 from paper_head import paper_head
 from torch import nn
 
+from depthq.blocks.device import resolve_device
+from depthq.blocks.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
+from depthq.blocks.heads import CollHead, DepthHead, QNet, probability
+from depthq.blocks.losses import coll_bce_loss, depth_l1_loss
+from depthq.blocks.mobilenet_v1 import MobileNetV1
+from depthq.blocks.optim import EPS, RHO, make_optimizer
+from depthq.blocks.trunk import COLUMNS, DEFAULT_TRUNK, TRUNKS, build_trunk, preprocess
 from depthq.errors import ConfigError
-from depthq.nets.device import resolve_device
-from depthq.nets.efficientnet_lite import efficientnet_lite0, fold_batchnorm, same_padding
-from depthq.nets.heads import CollHead, DepthHead, QNet, probability
-from depthq.nets.losses import coll_bce_loss, depth_l1_loss
-from depthq.nets.mobilenet_v1 import MobileNetV1
-from depthq.nets.optim import EPS, RHO, make_optimizer
-from depthq.nets.trunk import COLUMNS, DEFAULT_TRUNK, TRUNKS, build_trunk, preprocess
 from depthq.networks import build_head
 
 CAT_CLASSES = range(281, 286)  # tabby, tiger cat, Persian, Siamese, Egyptian cat
@@ -89,7 +89,7 @@ def test_frozen_trunk_stays_frozen(effnet_trunk):
 @pytest.mark.slow
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the heap setting is glibc's")
 def test_trunk_reuses_its_memory_instead_of_faulting_fresh_pages(effnet_trunk):
-    """Without depthq.nets.heap this call re-faults ~65,000 pages (and runs at half the speed)."""
+    """Without depthq.blocks.heap this call re-faults ~65,000 pages (and runs at half the speed)."""
     images = torch.rand(64, 3, 128, 128)
     with torch.inference_mode():
         for _ in range(3):  # the heap grows to its working size

@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from depthq.blocks.heads import CollHead
+from depthq.blocks.losses import DEPTH_CLIP
 from depthq.control.action_selection import ACTIONS
 from depthq.control.heuristic import DepthHeuristic
 from depthq.data.manifest import Dataset
@@ -19,8 +21,6 @@ from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4
 from depthq.evaluate.online import drive, parse_canyon_set
 from depthq.evaluate.video import write_video
-from depthq.nets.heads import CollHead
-from depthq.nets.losses import DEPTH_CLIP
 from depthq.networks import Network, ValuePlot, get_network, network_names, register_network, registry
 from depthq.policies.registry import make_policy
 from depthq.scripts.train import add_arguments

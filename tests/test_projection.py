@@ -18,13 +18,13 @@ from safetensors.torch import load_file
 from test_lockstep import assert_batch_decides_as_alone
 from test_lookahead import _one_step_head_by_hand
 
+from depthq.blocks.heads import QNet, pca_projection
+from depthq.blocks.optim import make_optimizer
 from depthq.cli import main
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.nets.heads import QNet, pca_projection
-from depthq.nets.optim import make_optimizer
 from depthq.networks import build_head, get_network, load_qnet
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.train.config import TrainConfig

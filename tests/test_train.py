@@ -13,6 +13,8 @@ import torch
 from conftest import unchecked
 from safetensors.torch import load, load_file, save
 
+from depthq.blocks.optim import make_optimizer
+from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
@@ -21,8 +23,6 @@ from depthq.data.samples import SampleConfig
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args
-from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.scripts.train import add_arguments

@@ -15,11 +15,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from depthq.cli import main
-from depthq.data.manifest import Dataset
-from depthq.data.views import view_arrays
-from depthq.errors import ConfigError, DataError
-from depthq.nets.trunk import (
+from depthq.blocks.trunk import (
     DEFAULT_TRUNK,
     STAGES,
     build_early_trunk,
@@ -28,6 +24,10 @@ from depthq.nets.trunk import (
     early_trunk_name,
     preprocess,
 )
+from depthq.cli import main
+from depthq.data.manifest import Dataset
+from depthq.data.views import view_arrays
+from depthq.errors import ConfigError, DataError
 from depthq.networks import load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig

@@ -9,10 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from depthq.configio import read_json
-from depthq.errors import ConfigError
-from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
-from depthq.nets.checkpoint import (
+from depthq.blocks.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_fails,
     average_margin,
@@ -21,6 +18,9 @@ from depthq.nets.checkpoint import (
     read_sidecar,
     write_sidecar,
 )
+from depthq.configio import read_json
+from depthq.errors import ConfigError
+from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
 from depthq.policies.qnet import QNetPolicy
 from research import weights_check
 

@@ -11,7 +11,8 @@ source against it, folders and files):
     ← control                               the Policy interface, OU exploration, the depth heuristic,
                                             action selection rules (collection drives them)
     ← data                                  collection and the on-disk datasets, ROS 2 bags
-    ← nets                                  trunks, heads, losses, optimizer, checkpoints read back
+    ← blocks                                a network's building blocks: trunks, heads, losses, optimizer,
+                                            checkpoints read back
     ← networks                              Depth-Q-Net, Coll-Q-Net and any network registered by name:
                                             what differs between networks, asked by every layer above
     ← policies                              the learned policies (torch or onnxruntime) and

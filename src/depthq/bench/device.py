@@ -11,9 +11,9 @@ from depthq.bench.policy import bench_policy
 from depthq.bench.sim import bench_sim
 from depthq.bench.step import bench_step
 from depthq.bench.train import bench_train
+from depthq.blocks.device import resolve_device
 from depthq.configio import write_json
 from depthq.host import host_fingerprint
-from depthq.nets.device import resolve_device
 from depthq.parallel import cores
 from depthq.pipeline.presets import get_preset
 from depthq.pipeline.stages import run_stages

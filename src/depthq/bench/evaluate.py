@@ -7,8 +7,8 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
+from depthq.blocks.device import resolve_device
 from depthq.evaluate.online import EvalConfig, at_policy_rate, drive_canyons
-from depthq.nets.device import resolve_device
 from depthq.policies.spec import PolicySpec
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from depthq.blocks.device import resolve_device
+from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.checksum import file_sha256
 from depthq.data.manifest import Dataset
-from depthq.nets.device import resolve_device
-from depthq.nets.trunk import DEFAULT_TRUNK, build_trunk
 from depthq.train.config import check_precisions
 from depthq.train.features import BATCH as DECODE_BATCH
 from depthq.train.features import frame_batches, prefetch, trunk_threads

@@ -8,11 +8,11 @@ import time
 import numpy as np
 import torch
 
+from depthq.blocks.device import resolve_device
+from depthq.blocks.heads import QNet
+from depthq.blocks.trunk import build_trunk
 from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
-from depthq.nets.device import resolve_device
-from depthq.nets.heads import QNet
-from depthq.nets.trunk import build_trunk
 from depthq.networks import build_head
 from depthq.parallel import cores
 from depthq.policies.qnet import QNetPolicy

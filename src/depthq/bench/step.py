@@ -12,9 +12,9 @@ import numpy as np
 import torch
 
 from depthq.bench.policy import BATCH, untrained_depth_policy
+from depthq.blocks.device import resolve_device
+from depthq.blocks.trunk import preprocess
 from depthq.control.heuristic import DepthHeuristic
-from depthq.nets.device import resolve_device
-from depthq.nets.trunk import preprocess
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.sim.env import CanyonEnv, EnvConfig, parse_canyon
 from depthq.sim.world import WorldConfig, world_for

@@ -9,11 +9,11 @@ import time
 import numpy as np
 import torch
 
-from depthq.nets.device import resolve_device
-from depthq.nets.heads import QNet
-from depthq.nets.losses import depth_l1_loss
-from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import STAGES, build_trunk, early_map_shape
+from depthq.blocks.device import resolve_device
+from depthq.blocks.heads import QNet
+from depthq.blocks.losses import depth_l1_loss
+from depthq.blocks.optim import make_optimizer
+from depthq.blocks.trunk import STAGES, build_trunk, early_map_shape
 from depthq.networks import build_head
 from depthq.parallel import cores
 from depthq.train.config import TrainConfig, check_precisions

@@ -7,7 +7,7 @@ in metres ("bins", Depth-Q-Net) or the collision probabilities (N,) ("collision_
 Coll-Q-Net). A
 Depth-Q-Net that looks K steps ahead takes candidate sequences (N, K) and returns (N, K, n_bins).
 Resizing and scaling to [0, 1] are inside the graph, so a robot needs nothing but onnxruntime and
-numpy. The resize is `depthq.nets.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
+numpy. The resize is `depthq.blocks.trunk.preprocess`'s to the last bit: PyTorch resizes uint8
 frames with Pillow's fixed-point algorithm (integer weights, a horizontal then a vertical pass,
 each rounded to whole grey levels); the graph does the same arithmetic exactly, in float64, with
 the weight matrices of the export's frame size. (A float resize differs by one grey level in ≈ 10 %
@@ -35,12 +35,12 @@ import torch
 from torch import nn
 
 from depthq import __version__
+from depthq.blocks.checkpoint import policy_record
+from depthq.blocks.heads import QNet
 from depthq.configio import atomic_write_bytes
 from depthq.control.action_selection import candidate_sequences
 from depthq.deploy.resize import resize_weights
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import policy_record
-from depthq.nets.heads import QNet
 from depthq.networks import Network, get_network, load_qnet
 
 OPSET = 18
@@ -93,7 +93,7 @@ def export_onnx(
 ) -> Path:
     """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path.
     `weights` (None: the checkpoint's choice), `actions` and `frame_size` (None: the
-    checkpoint's) as in `depthq.nets.checkpoint`."""
+    checkpoint's) as in `depthq.blocks.checkpoint`."""
     try:
         import onnx  # the optional [deploy] extra, as onnxscript: a missing one is a ConfigError
         import onnxscript  # noqa: F401  (what torch.onnx's exporter builds graphs with)

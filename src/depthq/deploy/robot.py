@@ -94,7 +94,7 @@ def decode(frame: Frame, max_pixels: int = MAX_PIXELS) -> np.ndarray:
 
 def fit(image: np.ndarray, frame_size: tuple[int, int] | None) -> np.ndarray:
     """`image` at the frame size a policy's graph takes (None: any size, as a checkpoint's), resized as
-    the graph and `depthq.nets.trunk.preprocess` resize (`depthq.deploy.resize`). Two resizes are not
+    the graph and `depthq.blocks.trunk.preprocess` resize (`depthq.deploy.resize`). Two resizes are not
     one: for a graph that sees the camera's frames as the checkpoint does, export it at the camera's
     size (`depthq export --frame-size HxW`)."""
     if frame_size is None or image.shape[:2] == tuple(frame_size):
@@ -120,7 +120,7 @@ def robot_policy(
         return policy, rate, policy.frame_size
     if parsed.checkpoint is None:
         raise ConfigError(f"a robot drives a learned policy, a checkpoint folder or onnx:PATH; got {spec!r}")
-    from depthq.nets.checkpoint import policy_record, read_config
+    from depthq.blocks.checkpoint import policy_record, read_config
     from depthq.policies.qnet import QNetPolicy
 
     policy = QNetPolicy.from_checkpoint(parsed.checkpoint, weights=weights, device=device)

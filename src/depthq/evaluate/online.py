@@ -19,6 +19,15 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from depthq.blocks.checkpoint import (
+    CONFIG,
+    chosen_weights,
+    dataset_record,
+    policy_record,
+    read_config,
+    weights_stem,
+)
+from depthq.blocks.device import resolve_device
 from depthq.configio import (
     OMIT_DEFAULT,
     atomic_write_bytes,
@@ -37,15 +46,6 @@ from depthq.evaluate.metrics import summarize
 from depthq.evaluate.run_record import FIG4_EVERY, RunRecord
 from depthq.evaluate.video import write_video
 from depthq.host import host_fingerprint
-from depthq.nets.checkpoint import (
-    CONFIG,
-    chosen_weights,
-    dataset_record,
-    policy_record,
-    read_config,
-    weights_stem,
-)
-from depthq.nets.device import resolve_device
 from depthq.parallel import LOCAL, Executor
 from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.registry import make_policy
@@ -320,7 +320,7 @@ def evaluate(
     data: Path | None = None,
 ) -> dict[str, Any]:
     """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
-    files to `out`; a Q-net runs on `device` (`depthq.nets.device`). `video`: the first canyon as
+    files to `out`; a Q-net runs on `device` (`depthq.blocks.device`). `video`: the first canyon as
     video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`).
     `data`: a checkpoint's dataset for the offline metrics, when it is no longer where it was
     (`depthq.train.offline_metric`)."""
@@ -368,7 +368,7 @@ def evaluate(
 def evaluation_done(folder: Path) -> bool:
     """Whether `folder` holds a finished evaluation (its summary.json) of its policy as the policy acts
     now: a checkpoint evaluated with its own default weights must have been driven with the weights it
-    chooses today (`depthq.nets.checkpoint.chosen_weights`: a weight average that fails its check acts
+    chooses today (`depthq.blocks.checkpoint.chosen_weights`: a weight average that fails its check acts
     with the final weights)."""
     path = Path(folder) / SUMMARY
     if not path.is_file():

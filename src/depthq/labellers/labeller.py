@@ -35,6 +35,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from depthq.blocks.checkpoint import DIGEST, read_weights, weights_bytes
+from depthq.blocks.device import resolve_device
+from depthq.blocks.losses import DEPTH_CLIP
+from depthq.blocks.optim import make_optimizer
+from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import (
     atomic_write_bytes,
@@ -51,11 +56,6 @@ from depthq.data.runfile import RunReader
 from depthq.data.views import run_then_frame
 from depthq.errors import ConfigError, DataError
 from depthq.labellers import floor, monodepth
-from depthq.nets.checkpoint import DIGEST, read_weights, weights_bytes
-from depthq.nets.device import resolve_device
-from depthq.nets.losses import DEPTH_CLIP
-from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
 from depthq.parallel import cores
 from depthq.progress import Bar
 from depthq.sim.sensors import BinConfig
@@ -223,7 +223,7 @@ def bin_geometry(dataset: Dataset) -> dict[str, Any]:
 def train_labeller(config: LabellerConfig, out: Path, progress: bool = True, device: str = "auto") -> Path:
     """Train `config` into the folder `out` and return it; a folder holding this labeller is returned as
     it is, one holding anything else is a ConfigError (nothing is written before the data is checked).
-    `device`: see `depthq.nets.device`."""
+    `device`: see `depthq.blocks.device`."""
     out, device = Path(out), resolve_device(device)
     if (out / CONFIG).is_file():
         if _config_record(read_record(out)) != to_dict(config):

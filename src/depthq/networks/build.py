@@ -1,15 +1,15 @@
 """A network's Q-net: its head built from a `HeadConfig` by the network `kind` names, or the whole
-net read back from a checkpoint folder (`depthq.nets.checkpoint` reads the folder; this builds it)."""
+net read back from a checkpoint folder (`depthq.blocks.checkpoint` reads the folder; this builds it)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
 
+from depthq.blocks.checkpoint import load_trainable_state, read_checkpoint
+from depthq.blocks.heads import Head, HeadConfig, QNet
+from depthq.blocks.trunk import build_trunk
 from depthq.configio import from_dict
-from depthq.nets.checkpoint import load_trainable_state, read_checkpoint
-from depthq.nets.heads import Head, HeadConfig, QNet
-from depthq.nets.trunk import build_trunk
 from depthq.networks.registry import get_network
 
 

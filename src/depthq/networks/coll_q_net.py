@@ -8,9 +8,9 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+from depthq.blocks.heads import CollHead, Head, HeadConfig, probability
+from depthq.blocks.losses import LossFn, coll_bce_loss
 from depthq.control.action_selection import RULES, Selection
-from depthq.nets.heads import CollHead, Head, HeadConfig, probability
-from depthq.nets.losses import LossFn, coll_bce_loss
 from depthq.networks.network import Network, ValuePlot
 from depthq.networks.registry import register_network
 

@@ -10,10 +10,10 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+from depthq.blocks.heads import DepthFirstHead, DepthHead, Head, HeadConfig
+from depthq.blocks.losses import LossFn, depth_l1_loss, lookahead_l1_loss
 from depthq.control.action_selection import RULES, Selection, sequence_scores
 from depthq.errors import ConfigError
-from depthq.nets.heads import DepthFirstHead, DepthHead, Head, HeadConfig
-from depthq.nets.losses import LossFn, depth_l1_loss, lookahead_l1_loss
 from depthq.networks.network import Network, ValuePlot
 from depthq.networks.registry import register_network
 

@@ -5,7 +5,7 @@ report and the sweeps ask it rather than test its name.
 A `Network` says what it is called (`name`, as checkpoints, sweeps and folders record it; `title`;
 `label`, the report's short name; `colour`), how it trains (`lr`, its default learning rate; the data
 view its samples come from, `samples`; its head, `build_head`; its loss, `loss_function`; the head's
-own training loss is the head's: `depthq.nets.heads.Head.training_loss`), how it is measured offline
+own training loss is the head's: `depthq.blocks.heads.Head.training_loss`), how it is measured offline
 (`metric`), how it acts (`output`: a head's raw output of one frame's candidates → its values;
 `scores`: values → one score per candidate, `maximise`: whether the highest wins; `tie_tol`; `rule`,
 by the name a checkpoint records), what an exported graph outputs (`onnx_output`), and how its values
@@ -20,13 +20,13 @@ from typing import Any, ClassVar, Literal
 import numpy as np
 import torch
 
+from depthq.blocks.heads import Head, HeadConfig
+from depthq.blocks.losses import LossFn
 from depthq.control.action_selection import Selection, first_actions, pick_best
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.manifest import Dataset
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
-from depthq.nets.heads import Head, HeadConfig
-from depthq.nets.losses import LossFn
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class Network:
 
     # -- training --------------------------------------------------------------------------------
     def default_form(self, lookahead: int) -> str:
-        """The head form (`depthq.nets.heads.HEAD_FORMS`) it gets unless told."""
+        """The head form (`depthq.blocks.heads.HEAD_FORMS`) it gets unless told."""
         return "concat"
 
     def check_lookahead(self, lookahead: object, what: str = "lookahead") -> None:

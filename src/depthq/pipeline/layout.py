@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from depthq.nets.migrations import FOLDER_KEYS
+from depthq.blocks.migrations import FOLDER_KEYS
 
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:

@@ -26,15 +26,15 @@ from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
+from depthq.blocks.checkpoint import read_config
+from depthq.blocks.device import resolve_device
+from depthq.blocks.migrations import sweep_setup
+from depthq.blocks.trunk import TRUNKS
 from depthq.configio import atomic_write_bytes, provenance, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
-from depthq.nets.checkpoint import read_config
-from depthq.nets.device import resolve_device
-from depthq.nets.migrations import sweep_setup
-from depthq.nets.trunk import TRUNKS
 from depthq.networks import get_network
 from depthq.parallel import LOCAL, Executor, Job
 from depthq.pipeline.sweep import Sweep

@@ -16,11 +16,11 @@ import typing
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from depthq.blocks.migrations import RENAMED_SETTINGS
 from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path, parse_value
-from depthq.nets.migrations import RENAMED_SETTINGS
 from depthq.networks import get_network, network_names
 from depthq.pipeline.layout import model_name, setting_text
 from depthq.sim.canyon import FAMILIES, eval_set, split_family

@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from depthq.blocks.checkpoint import chosen_weights, policy_record, weights_stem
+from depthq.blocks.heads import QNet
+from depthq.blocks.trunk import preprocess
 from depthq.control.action_selection import ACTIONS, Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import chosen_weights, policy_record, weights_stem
-from depthq.nets.heads import QNet
-from depthq.nets.trunk import preprocess
 from depthq.networks import get_network, load_qnet
 
 # Frames per trunk call in `act_batch` (docs/design.md#lockstep): up to 15 a call, each frame's features
@@ -66,7 +66,7 @@ class QNetPolicy(GreedyPolicy):
         selection: Selection | None = None,
     ) -> QNetPolicy:
         """The policy of a checkpoint folder: `weights` (None: the checkpoint's choice) and
-        `actions` (None: the checkpoint's) as in `depthq.nets.checkpoint`; `selection` (None: the
+        `actions` (None: the checkpoint's) as in `depthq.blocks.checkpoint`; `selection` (None: the
         default rule) for a Depth-Q-Net."""
         net, config = load_qnet(Path(folder), weights=weights)
         kind = config["train"]["model"]

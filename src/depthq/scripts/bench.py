@@ -6,8 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from depthq.blocks.device import DEVICE_HELP
 from depthq.errors import ConfigError
-from depthq.nets.device import DEVICE_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from depthq.blocks.device import DEVICE_HELP, resolve_device
 from depthq.errors import ConfigError
 from depthq.flags import add_config_arguments, config_from_args
-from depthq.nets.device import DEVICE_HELP, resolve_device
 
 # EvalConfig's flags drive shares with `depthq evaluate`, and their spellings from before they were
 # made from it (aliases); the canyon is drive's own (one), and it drives no lock-step batch.

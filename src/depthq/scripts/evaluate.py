@@ -6,8 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from depthq.blocks.device import DEVICE_HELP
 from depthq.flags import add_config_arguments, config_from_args
-from depthq.nets.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
 
 # EvalConfig's fields keep the flags they had before they were made from it, as aliases; --canyons

@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.blocks.device import DEVICE_HELP
 from depthq.flags import add_config_arguments, config_from_args
-from depthq.nets.device import DEVICE_HELP
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

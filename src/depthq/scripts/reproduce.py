@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from depthq.nets.device import DEVICE_HELP
+from depthq.blocks.device import DEVICE_HELP
 from depthq.parallel import add_executor_arguments, executor_from
 from depthq.pipeline.preset_times import DEFAULT_PRESET, DURATIONS, presets_help
 from depthq.scripts.sweep import DRY_RUN_HELP

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.blocks.device import DEVICE_HELP
 from depthq.flags import add_config_arguments
-from depthq.nets.device import DEVICE_HELP
 from depthq.networks import network_names
 from depthq.parallel import add_executor_arguments, executor_from
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from depthq.blocks.checkpoint import chosen_weights, read_config, read_sidecar
+from depthq.blocks.device import DEVICE_HELP
+from depthq.blocks.migrations import RENAMED_SETTINGS
 from depthq.flags import add_config_arguments, config_from_args, flag_name
-from depthq.nets.checkpoint import chosen_weights, read_config, read_sidecar
-from depthq.nets.device import DEVICE_HELP
-from depthq.nets.migrations import RENAMED_SETTINGS
 from depthq.train.config import TrainConfig
 
 # Older spellings of TrainConfig's flags, accepted for one release: --select, and the sample settings'

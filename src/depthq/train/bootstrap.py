@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import torch
 
+from depthq.blocks.heads import Head
 from depthq.control.action_selection import ACTIONS
-from depthq.nets.heads import Head
 from depthq.networks import DepthQNet
 
 _STRAIGHT = ACTIONS.index(0.0)

@@ -7,16 +7,16 @@ import typing
 from dataclasses import dataclass, field
 from typing import Literal
 
+from depthq.blocks.checkpoint import WEIGHTS
+from depthq.blocks.heads import BIN_GRADIENTS, HEAD_FORMS, HeadConfig
+from depthq.blocks.losses import DEPTH_LOSSES
+from depthq.blocks.optim import EPS, RHO, WEIGHT_DECAY
+from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.flags import CHOICES
-from depthq.nets.checkpoint import WEIGHTS
-from depthq.nets.heads import BIN_GRADIENTS, HEAD_FORMS, HeadConfig
-from depthq.nets.losses import DEPTH_LOSSES
-from depthq.nets.optim import EPS, RHO, WEIGHT_DECAY
-from depthq.nets.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
 from depthq.networks import get_network, network_names
 
 # From docs/convergence.png (200 runs, seed 0, 60 epochs, dropout 0): validation loss at 40 epochs is
@@ -95,7 +95,7 @@ class TrainConfig:
     eps: float = EPS
     # L2 weight decay of the head's weights (the original's).
     weight_decay: float = WEIGHT_DECAY
-    trunk: TrunkName = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.nets.trunk)
+    trunk: TrunkName = DEFAULT_TRUNK  # the image network whose feature the head reads (depthq.blocks.trunk)
     # N > 0 trains the trunk's last N of its 7 MBConv stages with the head, from a cache of the frozen
     # early stages' activations per frame (docs/design.md#tuned-trunk; a column or grid trunk); the
     # checkpoint stores those stages. 0: the trunk as it is (frozen: the head alone is trained).
@@ -108,7 +108,7 @@ class TrainConfig:
     action_scale: float = 10.0
     # Side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
-    # Depth-Q-Net's L1 loss over the bins (`depthq.nets.losses.depth_l1_loss`)
+    # Depth-Q-Net's L1 loss over the bins (`depthq.blocks.losses.depth_l1_loss`)
     depth_loss: DepthLoss = "original"
     # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
     # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's

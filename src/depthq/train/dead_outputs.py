@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from depthq.blocks.checkpoint import dataset_record, policy_record, read_config
+from depthq.blocks.heads import DepthFirstHead, DepthHead, QNet
 from depthq.control.action_selection import candidate_sequences
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
-from depthq.nets.checkpoint import dataset_record, policy_record, read_config
-from depthq.nets.heads import DepthFirstHead, DepthHead, QNet
 from depthq.networks.build import load_qnet
 from depthq.train.features import load_activations, load_features
 

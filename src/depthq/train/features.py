@@ -27,7 +27,7 @@ of magnitude < 10, so rounding errs by at most 2⁻¹¹ relative (< 0.005 absolu
 A trunk tuned from cached activations (`TrainConfig.tune_stages`, docs/design.md#tuned-trunk) reads
 the activation cache of its frozen early stages (`load_activations`): the same layout, format and
 checks, the early stages' flattened map as each frame's row, in DIR/features/<early trunk>_<size>/
-(`depthq.nets.trunk.early_trunk_name`: efficientnet_lite0_stage5_128 for a trunk tuning its last 2
+(`depthq.blocks.trunk.early_trunk_name`: efficientnet_lite0_stage5_128 for a trunk tuning its last 2
 stages, 7168 numbers a frame).
 """
 
@@ -44,12 +44,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from depthq.checksum import file_sha256
-from depthq.configio import provenance, read_json, write_json
-from depthq.data.manifest import Dataset, RunEntry
-from depthq.errors import ConfigError, DataError
-from depthq.host import host_fingerprint
-from depthq.nets.trunk import (
+from depthq.blocks.trunk import (
     STAGES,
     Trunk,
     build_early_trunk,
@@ -59,6 +54,11 @@ from depthq.nets.trunk import (
     preprocess,
     trunk_spec,
 )
+from depthq.checksum import file_sha256
+from depthq.configio import provenance, read_json, write_json
+from depthq.data.manifest import Dataset, RunEntry
+from depthq.errors import ConfigError, DataError
+from depthq.host import host_fingerprint
 from depthq.parallel import cores
 from depthq.progress import Bar
 
@@ -112,7 +112,7 @@ def load_activations(
     mirrored: bool = False,
 ) -> FeatureTable:
     """The cached map of the frozen early stages of a trunk whose last `tune_stages` stages are tuned
-    (`depthq.nets.trunk.build_early_trunk`), one flattened row per frame, computed first if missing or
+    (`depthq.blocks.trunk.build_early_trunk`), one flattened row per frame, computed first if missing or
     stale; as `load_features` otherwise."""
     frozen = STAGES - tune_stages
     channels, side, _ = early_map_shape(frozen, size)

@@ -3,7 +3,7 @@
 Layout of OUT/ (every file but the TensorBoard log is written atomically: temporary sibling, rename;
 a killed training's temporaries are removed when it resumes):
 
-    config.json              what was trained, on which data, for which policy (`depthq.nets.checkpoint`,
+    config.json              what was trained, on which data, for which policy (`depthq.blocks.checkpoint`,
                              which owns the format: this file and the weight files, version, digests)
     best.safetensors         weights at the epoch of lowest validation loss: the head's ("head.*",
     last.safetensors         its fitted feature projection's buffers "head.projection.*" included),
@@ -15,7 +15,7 @@ a killed training's temporaries are removed when it resumes):
                              fraction `TrainConfig.average` so far (from its first epoch on)
     best.json, last.json     epoch and metrics of those weights (epoch_0040.json likewise; average.json:
                              the epochs averaged, their count, the mean's validation loss), each with
-                             its checksum (`depthq.nets.checkpoint.write_sidecar`)
+                             its checksum (`depthq.blocks.checkpoint.write_sidecar`)
     metrics.csv              epoch, train_loss, val_loss, val_loss_std, seconds (one row per epoch;
                              the seconds, a timing, are a log: no other file holds one)
     last_state.safetensors   everything a resume needs, in one file so it is consistent: weights
@@ -45,11 +45,7 @@ import torch
 from safetensors import SafetensorError, safe_open
 from torch.optim.swa_utils import AveragedModel
 
-from depthq.configio import atomic_write_bytes, field_paths, to_dict, write_json
-from depthq.control.action_selection import ACTIONS
-from depthq.data.manifest import Dataset
-from depthq.errors import ConfigError, DataError
-from depthq.nets.checkpoint import (
+from depthq.blocks.checkpoint import (
     CONFIG,
     DatasetRecord,
     PolicyRecord,
@@ -63,8 +59,12 @@ from depthq.nets.checkpoint import (
     write_record,
     write_sidecar,
 )
-from depthq.nets.heads import QNet
-from depthq.nets.trunk import build_trunk
+from depthq.blocks.heads import QNet
+from depthq.blocks.trunk import build_trunk
+from depthq.configio import atomic_write_bytes, field_paths, to_dict, write_json
+from depthq.control.action_selection import ACTIONS
+from depthq.data.manifest import Dataset
+from depthq.errors import ConfigError, DataError
 from depthq.networks import build_head, get_network
 from depthq.sim.sensors import BinConfig
 from depthq.train.config import TrainConfig
@@ -160,7 +160,7 @@ def record_training(
 ) -> None:
     """config.json: the training, its dataset (absolute path, fingerprint, env config as its manifest
     records it, the `labeller` of the camera labels it learns from) and what a policy of it needs
-    (`depthq.nets.checkpoint.PolicyRecord`)."""
+    (`depthq.blocks.checkpoint.PolicyRecord`)."""
     env = dataset.config.get("env")  # none in a robot's recording
     with dataset.reader(dataset.entries("train")[0]) as reader:
         height, width, _ = reader.image_shape

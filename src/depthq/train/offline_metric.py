@@ -25,11 +25,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from depthq.blocks.checkpoint import chosen_weights, dataset_record, policy_record, weights_stem
+from depthq.blocks.trunk import preprocess
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
-from depthq.nets.checkpoint import chosen_weights, dataset_record, policy_record, weights_stem
-from depthq.nets.trunk import preprocess
 from depthq.networks import get_network, load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import candidates_of, dead_in, has_bins

@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from depthq.blocks.heads import QNet
+from depthq.blocks.losses import DEPTH_CLIP
+from depthq.blocks.trunk import resize_frames, scale_frames
 from depthq.data.views import FrameView, run_then_frame
-from depthq.nets.heads import QNet
-from depthq.nets.losses import DEPTH_CLIP
-from depthq.nets.trunk import resize_frames, scale_frames
 from depthq.progress import Bar
 from depthq.train.features import FeatureTable
 

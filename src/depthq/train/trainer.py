@@ -17,14 +17,14 @@ from torch.optim import Optimizer
 from torch.optim.swa_utils import AveragedModel
 from torch.utils.tensorboard import SummaryWriter
 
+from depthq.blocks.device import resolve_device
+from depthq.blocks.heads import Head, QNet
+from depthq.blocks.losses import LossFn
+from depthq.blocks.optim import make_optimizer
+from depthq.blocks.trunk import TRUNKS
 from depthq.data.manifest import Dataset
 from depthq.data.views import FrameView
 from depthq.errors import ConfigError
-from depthq.nets.device import resolve_device
-from depthq.nets.heads import Head, QNet
-from depthq.nets.losses import LossFn
-from depthq.nets.optim import make_optimizer
-from depthq.nets.trunk import TRUNKS
 from depthq.networks import get_network
 from depthq.parallel import cores
 from depthq.progress import Bar
@@ -47,7 +47,7 @@ def train(
     A folder holding this training resumes from its last epoch, bit for bit as if never stopped (on
     the CPU, with the same `threads`: torch sums floats in an order that depends on their number;
     None: this process's cores; a GPU's kernels need not be deterministic); a finished one is
-    returned as is; one holding another training is a ConfigError. `device`: see `depthq.nets.device`.
+    returned as is; one holding another training is a ConfigError. `device`: see `depthq.blocks.device`.
     """
     out = Path(out)
     where = resolve_device(device)

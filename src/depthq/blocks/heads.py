@@ -37,9 +37,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from depthq.blocks.losses import LossFn
+from depthq.blocks.trunk import Trunk
 from depthq.errors import ConfigError
-from depthq.nets.losses import LossFn
-from depthq.nets.trunk import Trunk
 
 # "concat": the action appended to the feature (the paper's); "per_action": bins per anchor action;
 # "depth_first": the current bins from the feature, then the next bins from them and the action.

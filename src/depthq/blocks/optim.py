@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from torch import nn
 
+from depthq.blocks.adadelta import BlockedAdadelta
 from depthq.errors import ConfigError
-from depthq.nets.adadelta import BlockedAdadelta
 
 # TensorFlow's Adadelta defaults; PyTorch's are rho=0.9, eps=1e-6.
 RHO = 0.95
@@ -15,7 +15,7 @@ WEIGHT_DECAY = 4e-5
 
 def make_optimizer(model: nn.Module, lr: float, weight_decay: float = WEIGHT_DECAY, rho: float = RHO,
                    eps: float = EPS) -> BlockedAdadelta:
-    """Adadelta (stepped block by block, see `depthq.nets.adadelta`) over the trainable parameters
+    """Adadelta (stepped block by block, see `depthq.blocks.adadelta`) over the trainable parameters
     of `model`; frozen ones are left out.
 
     Weight decay (gradient += wd · w, the same as TF's l2_regularizer(wd) on tf.nn.l2_loss) applies

@@ -20,9 +20,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from depthq.errors import ConfigError
-from depthq.nets.efficientnet_lite import FEATURE_DIM as EFFICIENTNET_DIM
-from depthq.nets.efficientnet_lite import (
+from depthq.blocks.efficientnet_lite import FEATURE_DIM as EFFICIENTNET_DIM
+from depthq.blocks.efficientnet_lite import (
     LITE0_STAGES,
     EfficientNetLite0,
     efficientnet_lite0,
@@ -30,9 +29,10 @@ from depthq.nets.efficientnet_lite import (
     scale_input,
     stage_blocks,
 )
-from depthq.nets.heap import keep_freed_memory
-from depthq.nets.mobilenet_v1 import FEATURE_DIM as MOBILENET_DIM
-from depthq.nets.mobilenet_v1 import MobileNetV1
+from depthq.blocks.heap import keep_freed_memory
+from depthq.blocks.mobilenet_v1 import FEATURE_DIM as MOBILENET_DIM
+from depthq.blocks.mobilenet_v1 import MobileNetV1
+from depthq.errors import ConfigError
 
 INPUT_SIZE = 128
 # Frames per trunk call when frozen: at 128 px, 8–16 frames keep the activations in the 2 MB L2 cache;
@@ -187,7 +187,7 @@ def build_trunk(name: str, pretrained: bool = True, tune_stages: int = 0) -> Tru
     `tune_stages` N > 0: its last N MBConv stages trained, the others frozen (`TunedFeatures`)."""
     spec = trunk_spec(name)
     check_tune_stages(name, tune_stages)
-    keep_freed_memory()  # a trunk allocates tens of MB per call: see depthq.nets.heap
+    keep_freed_memory()  # a trunk allocates tens of MB per call: see depthq.blocks.heap
     if tune_stages:
         split = TunedFeatures(spec.build(pretrained), STAGES - tune_stages)
         return Trunk(name, split, spec.feature_dim, frozen=False)

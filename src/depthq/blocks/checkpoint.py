@@ -37,7 +37,7 @@ written is refused; one written before checksums is read as it is. Weight files'
 with sorted keys, so equal tensors and metadata give equal bytes in any process.
 
 Older versions still load: `read_config` gives them version 3's shape through their version's
-migration (`depthq.nets.migrations`, one function per version): 1 (no digests), 2 (the layout before
+migration (`depthq.blocks.migrations`, one function per version): 1 (no digests), 2 (the layout before
 `dataset` and `policy`), and version 3 as written before its later fields (added, renamed, moved).
 A newer version is refused by name.
 """
@@ -58,13 +58,13 @@ from safetensors import SafetensorError
 from safetensors.torch import load as load_safetensors
 from safetensors.torch import save as save_safetensors
 
+from depthq.blocks.heads import HeadConfig, QNet
+from depthq.blocks.migrations import migrate_checkpoint
+from depthq.blocks.trunk import TRUNKS
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import OMIT_DEFAULT, from_dict, provenance, to_dict
 from depthq.errors import ConfigError, DataError
 from depthq.host import host_fingerprint
-from depthq.nets.heads import HeadConfig, QNet
-from depthq.nets.migrations import migrate_checkpoint
-from depthq.nets.trunk import TRUNKS
 from depthq.sim.canyon import PAPER
 
 CONFIG = "config.json"
