@@ -539,17 +539,30 @@ def diagnose(out: Path, *, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
                     folder = where / f"{net}_s{seed}"
                     if net not in nets or not (checkpoint / CONFIG).is_file():
                         continue
-                    _drive(checkpoint, folder, replace(driving, look=look_of(out, drive)), workers, progress,
-                           device)
+                    config = replace(driving, look=look_of(out, drive))
+                    driven = out / look / f"eval_{drive}" / folder.name  # `run` in the same canyons
+                    if evaluation_done(folder) or not _driven_as(driven, config):
+                        _drive(checkpoint, folder, config, workers, progress, device)
+                        driven = folder
                     path = agreement_file(where, folder.name, oracle, ".json")
-                    weights = read_json(folder / "summary.json")["policy"]["weights"]
+                    weights = read_json(driven / "summary.json")["policy"]["weights"]
                     if path.is_file() and read_checked_json(path, FIX)["weights"] == weights:
                         continue
-                    print(f"agreement of {folder} → {path}", flush=True)
-                    summary = measure_agreement(folder, oracle, where, predictions=True)
+                    print(f"agreement of {driven} → {path}", flush=True)
+                    summary = measure_agreement(driven, oracle, where, predictions=True)
                     write_checked_json(path, {**summary, "weights": weights})
     print(markdown(diagnosis_rows(out, seeds, train_looks, drive_looks, nets)))
     return 0
+
+
+def _driven_as(folder: Path, config: EvalConfig) -> bool:
+    """Whether `folder` holds a finished evaluation driven in `config`'s canyons, look and time limit
+    (`run` drove it where `diagnose` would: its runs are measured instead of driving them again)."""
+    if not evaluation_done(folder):
+        return False
+    held, wanted = read_json(folder / "summary.json")["config"], json.loads(json.dumps(asdict(config)))
+    keys = ("canyons", "look") if config.time_limit_s is None else ("canyons", "look", "time_limit_s")
+    return all(held.get(key) == wanted[key] for key in keys)  # none: the family's, as `run` resolved it
 
 
 DIAGNOSIS = {"distance_to_collision_mean": ("m to first collision", ".2f"),

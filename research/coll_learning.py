@@ -1,0 +1,166 @@
+"""Why Coll-Q-Net learns in one look and not in another (issue #57 item 5; docs/research/looks.md#coll).
+
+    python -m research.coll_learning CHECKPOINT [CHECKPOINT ...] [--json OUT.json]
+
+Per Coll-Q-Net checkpoint, on the validation samples of the dataset it was trained on (per look where
+the dataset holds runs rendered again in other looks, `depthq dataset rerender`):
+
+- how often a sample's target is a collision (`positives`), the cross-entropy of always predicting the
+  training samples' rate (`constant`) and the net's own (`bce`): a net whose `bce` is not below
+  `constant` has learnt nothing a look-blind guess does not know;
+- how well its probability ranks the samples that collide above those that do not (`auc`, the
+  Mann-Whitney area under the ROC curve; 0.5 is chance);
+- the same area for a logistic regression on the net's own input (the trunk's feature and the scaled
+  action), fitted on the training samples (`probe_auc`): what the feature itself tells about a coming
+  collision. A low `probe_auc` blames the feature (the frozen trunk in that look); a high one beside a
+  low `auc` blames the training;
+- its validation loss at the first, best and last epoch (metrics.csv).
+
+Nothing is trained but the probe (seconds); the checkpoints and their datasets are read only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from scipy.stats import rankdata
+
+from depthq.blocks.checkpoint import read_config
+from depthq.configio import from_dict, write_json
+from depthq.data.rerender import STRIDE, rendered_looks
+from depthq.errors import ConfigError, guarded
+from depthq.networks import get_network, load_qnet
+from depthq.report.tables import markdown
+from depthq.train.config import TrainConfig
+from depthq.train.features import load_activations, load_features
+from depthq.train.folder import read_metrics
+from depthq.train.offline_metric import training_data
+
+PROBE_STEPS, PROBE_L2 = 200, 1e-3  # the probe's L-BFGS steps and L2 weight (on standardised inputs)
+
+
+def auc(scores: np.ndarray, positive: np.ndarray) -> float:
+    """The area under the ROC curve of `scores` for `positive` (ties halved); NaN with one class."""
+    n_pos, n_neg = int(positive.sum()), int((~positive).sum())
+    if not n_pos or not n_neg:
+        return float("nan")
+    ranks = rankdata(scores)
+    return float((ranks[positive].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+
+
+def bce(p: np.ndarray, y: np.ndarray) -> float:
+    p = np.clip(p, 1e-7, 1 - 1e-7)
+    return float(-np.mean(y * np.log(p) + (1 - y) * np.log(1 - p)))
+
+
+def probe(x_train: torch.Tensor, y_train: torch.Tensor, x_val: torch.Tensor) -> np.ndarray:
+    """A logistic regression (L2 `PROBE_L2`) fitted on standardised training inputs → P on `x_val`."""
+    mean, std = x_train.mean(0), x_train.std(0) + 1e-6
+    x, xv = (x_train - mean) / std, (x_val - mean) / std
+    torch.manual_seed(0)
+    w = torch.zeros(x.shape[1], requires_grad=True)
+    b = torch.zeros(1, requires_grad=True)
+    optimiser = torch.optim.LBFGS([w, b], max_iter=PROBE_STEPS, line_search_fn="strong_wolfe")
+
+    def closure() -> torch.Tensor:
+        optimiser.zero_grad()
+        fit = torch.nn.functional.binary_cross_entropy_with_logits(x @ w + b, y_train)
+        loss = fit + PROBE_L2 * w.square().sum()
+        loss.backward()
+        return loss
+
+    optimiser.step(closure)
+    with torch.no_grad():
+        return torch.sigmoid(xv @ w + b).numpy()
+
+
+def measure(checkpoint: Path) -> list[dict[str, Any]]:
+    """One row per look of the checkpoint's validation samples (one row for a one-look dataset)."""
+    record = read_config(checkpoint)
+    train = from_dict(TrainConfig, record["train"])
+    network = get_network(train.model)
+    if network.view != "collision":
+        raise ConfigError(f"{checkpoint}: a {network.title}, not a Coll-Q-Net")
+    dataset = training_data(record, None)
+    if dataset is None:
+        raise ConfigError(f"{checkpoint}: its dataset is not found")
+    net, _ = load_qnet(checkpoint)
+    inputs, targets = {}, {}
+    for split in ("train", "val"):
+        arrays = network.samples(dataset, split, train.runs if split == "train" else None, train)
+        with torch.no_grad():
+            if train.tune_stages:
+                table = load_activations(dataset, train.tune_stages, train.input_size, progress=False)
+                feature = net.trunk.late_features(table.gather(split, arrays).float())
+            else:
+                feature = load_features(dataset, train.trunk, train.input_size, progress=False).gather(
+                    split, arrays).float()
+        action = torch.from_numpy(np.asarray(arrays["action"], np.float32))
+        inputs[split] = (feature, action, arrays)
+        targets[split] = np.asarray(arrays["target"], np.float32)
+    feature, action, arrays = inputs["val"]
+    with torch.no_grad():
+        p_net = network.output(net.head(feature, action)).numpy().reshape(-1)
+    train_feature, train_action, _ = inputs["train"]
+    flat = train_feature.reshape(len(train_feature), -1)
+    x_train = torch.cat([flat, train_action.reshape(len(flat), -1) * train.action_scale], 1)
+    x_val = torch.cat([feature.reshape(len(feature), -1),
+                       action.reshape(len(feature), -1) * train.action_scale], 1)
+    p_probe = probe(x_train, torch.from_numpy(targets["train"]), x_val)
+    rate = float(targets["train"].mean())
+    entries = dataset.entries("val")
+    looks = {0: dataset.config.get("env", {}).get("world", {}).get("look") or "collected"}
+    looks.update({k: look for k, (look, _) in rendered_looks(dataset).items()})
+    version = np.array([entries[int(r)].index // STRIDE for r in arrays["run_id"]])
+    metrics = read_metrics(checkpoint)
+    rows = []
+    for v in sorted(set(version.tolist())):
+        keep = version == v
+        y = targets["val"][keep]
+        rows.append({
+            "checkpoint": str(checkpoint), "look": str(looks.get(v, v)), "samples": int(keep.sum()),
+            "positives": float(y.mean()), "constant": bce(np.full_like(y, rate), y),
+            "bce": bce(p_net[keep], y),
+            "auc": auc(p_net[keep], y > 0.5), "probe_auc": auc(p_probe[keep], y > 0.5),
+            "val_loss_first": float(metrics["val_loss"][0]),
+            "val_loss_best": float(np.nanmin(metrics["val_loss"])),
+            "val_loss_last": float(metrics["val_loss"][-1]),
+        })
+    return rows
+
+
+COLUMNS = {"look": "look", "samples": "val samples", "positives": "collide", "constant": "BCE, constant",
+           "bce": "BCE, net", "auc": "AUC, net", "probe_auc": "AUC, linear probe",
+           "val_loss_first": "val loss, epoch 1", "val_loss_best": "best", "val_loss_last": "last"}
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    return markdown([{"checkpoint": row["checkpoint"], **{title: row[k] if isinstance(row[k], str) else (
+        str(row[k]) if isinstance(row[k], int) else f"{row[k]:.3f}") for k, title in COLUMNS.items()}}
+        for row in rows])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m research.coll_learning",
+                                     description=(__doc__ or "").split("\n\n")[0])
+    parser.add_argument("checkpoints", nargs="+", type=Path, help="Coll-Q-Net checkpoint folders")
+    parser.add_argument("--json", type=Path, help="also write the rows to this JSON file")
+    args = parser.parse_args(argv)
+
+    def work() -> int:
+        rows = [row for checkpoint in args.checkpoints for row in measure(checkpoint)]
+        print(table(rows))
+        if args.json:
+            write_json(args.json, {"rows": rows})
+        return 0
+
+    return guarded("python -m research.coll_learning", work)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
