@@ -1,6 +1,8 @@
 """Why Coll-Q-Net learns in one look and not in another (issue #57 item 5; docs/research/looks.md#coll).
 
-    python -m research.coll_learning CHECKPOINT [CHECKPOINT ...] [--json OUT.json]
+    python -m research.coll_learning measure CHECKPOINT [CHECKPOINT ...] [--json OUT.json]
+    python -m research.coll_learning run LIKE OUT [--variants pinned,final,dropout,mirror]
+        [--canyons hard/val:1000-1019] [--look LOOK]
 
 Per Coll-Q-Net checkpoint, on the validation samples of the dataset it was trained on (per look where
 the dataset holds runs rendered again in other looks, `depthq dataset rerender`):
@@ -14,15 +16,23 @@ the dataset holds runs rendered again in other looks, `depthq dataset rerender`)
   action), fitted on the training samples (`probe_auc`): what the feature itself tells about a coming
   collision. A low `probe_auc` blames the feature (the frozen trunk in that look); a high one beside a
   low `auc` blames the training;
+- how far apart its candidates' probabilities are in a frame (`spread`, the mean over frames of the
+  highest minus the lowest): what its policy acts on, where `auc` mostly measures how dangerous a frame
+  is whatever the action;
 - its validation loss at the first, best and last epoch (metrics.csv).
 
-Nothing is trained but the probe (seconds); the checkpoints and their datasets are read only.
+`measure` trains nothing but the probe (seconds); the checkpoints and their datasets are read only.
+`run` gives Coll-Q-Net its chances on the data of checkpoint LIKE (its training config, varied by each of
+VARIANTS): each variant trained into OUT/models/<variant> (resumed), driven in `--canyons` (never the
+`eval` ones) in the data's look or `--look` into OUT/eval/<variant>, measured as above; then the table
+with each variant's distance to the first collision (OUT/results.json).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,16 +40,21 @@ import numpy as np
 import torch
 from scipy.stats import rankdata
 
-from depthq.blocks.checkpoint import read_config
-from depthq.configio import from_dict, write_json
+from depthq.blocks.checkpoint import policy_record, read_config
+from depthq.configio import from_dict, read_json, write_json
+from depthq.data.manifest import Dataset
 from depthq.data.rerender import STRIDE, rendered_looks
 from depthq.errors import ConfigError, guarded
+from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.networks import get_network, load_qnet
 from depthq.report.tables import markdown
+from depthq.sim.canyon import split_family
 from depthq.train.config import TrainConfig
+from depthq.train.dead_outputs import candidates_of
 from depthq.train.features import load_activations, load_features
 from depthq.train.folder import read_metrics
 from depthq.train.offline_metric import training_data
+from depthq.train.trainer import train
 
 PROBE_STEPS, PROBE_L2 = 200, 1e-3  # the probe's L-BFGS steps and L2 weight (on standardised inputs)
 
@@ -79,7 +94,7 @@ def probe(x_train: torch.Tensor, y_train: torch.Tensor, x_val: torch.Tensor) -> 
         return torch.sigmoid(xv @ w + b).numpy()
 
 
-def measure(checkpoint: Path) -> list[dict[str, Any]]:
+def measure(checkpoint: Path, weights: str | None = None) -> list[dict[str, Any]]:
     """One row per look of the checkpoint's validation samples (one row for a one-look dataset)."""
     record = read_config(checkpoint)
     train = from_dict(TrainConfig, record["train"])
@@ -89,7 +104,7 @@ def measure(checkpoint: Path) -> list[dict[str, Any]]:
     dataset = training_data(record, None)
     if dataset is None:
         raise ConfigError(f"{checkpoint}: its dataset is not found")
-    net, _ = load_qnet(checkpoint)
+    net, _ = load_qnet(checkpoint, weights=weights)
     inputs, targets = {}, {}
     for split in ("train", "val"):
         arrays = network.samples(dataset, split, train.runs if split == "train" else None, train)
@@ -106,6 +121,10 @@ def measure(checkpoint: Path) -> list[dict[str, Any]]:
     feature, action, arrays = inputs["val"]
     with torch.no_grad():
         p_net = network.output(net.head(feature, action)).numpy().reshape(-1)
+        candidates = candidates_of(net, policy_record(record).actions)
+        each = [network.output(net.head(feature, torch.full_like(action, float(a)))).numpy().reshape(-1)
+                for a in candidates]
+    spread = np.ptp(np.stack(each), axis=0)  # per frame: the candidates' highest P − lowest
     train_feature, train_action, _ = inputs["train"]
     flat = train_feature.reshape(len(train_feature), -1)
     x_train = torch.cat([flat, train_action.reshape(len(flat), -1) * train.action_scale], 1)
@@ -127,6 +146,7 @@ def measure(checkpoint: Path) -> list[dict[str, Any]]:
             "positives": float(y.mean()), "constant": bce(np.full_like(y, rate), y),
             "bce": bce(p_net[keep], y),
             "auc": auc(p_net[keep], y > 0.5), "probe_auc": auc(p_probe[keep], y > 0.5),
+            "spread": float(spread[keep].mean()),
             "val_loss_first": float(metrics["val_loss"][0]),
             "val_loss_best": float(np.nanmin(metrics["val_loss"])),
             "val_loss_last": float(metrics["val_loss"][-1]),
@@ -134,25 +154,79 @@ def measure(checkpoint: Path) -> list[dict[str, Any]]:
     return rows
 
 
+# Coll-Q-Net's chances (`run`): training settings over LIKE's, and the weights it drives with (none:
+# its own choice, the best validation loss).
+VARIANTS: dict[str, tuple[dict[str, Any], str | None]] = {
+    "pinned": ({}, None),
+    "final": ({}, "final"),  # the pinned training driven with its last epoch's weights
+    "dropout": ({"dropout": 0.5}, None),  # the paper's dropout
+    "mirror": ({"mirror": True}, None),  # every sample mirrored with probability 1/2
+    "dropout+mirror": ({"dropout": 0.5, "mirror": True}, None),
+}
+
+
+def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: str | None) -> int:
+    """Every variant trained, driven and measured (each step resumed)."""
+    if unknown := sorted(set(variants) - set(VARIANTS)):
+        raise ConfigError(f"--variants {','.join(unknown)}: not one of {', '.join(VARIANTS)}")
+    if any(split_family(c)[1].startswith("eval") for c in canyons.split(",")):
+        raise ConfigError(f"--canyons {canyons!r}: the eval canyons are the test set; choose in val ones")
+    base = read_config(like)
+    train_config = from_dict(TrainConfig, base["train"])
+    look = look or Dataset.open(Path(train_config.data)).config.get("env", {}).get("world", {}).get("look")
+    results_path = out / "results.json"
+    results: dict[str, Any] = read_json(results_path) if results_path.is_file() else {}
+    for name in variants:
+        settings, weights = VARIANTS[name]
+        trained = "pinned" if not settings else name
+        folder = out / "models" / trained
+        train(replace(train_config, **settings), folder, progress=False)
+        driven = out / "eval" / name
+        config = EvalConfig(canyons=parse_canyon_set(canyons), look=look, weights=weights)
+        if not evaluation_done(driven):
+            evaluate(str(folder), driven, config, workers=1, progress=False, video=False)
+        row = measure(folder, weights)[0]
+        row["variant"] = name
+        row["distance"] = read_json(driven / "summary.json")["summary"]["distance_to_collision_mean"]
+        results[name] = row
+        write_json(results_path, results)
+        print(f"{name}: {row['distance']:.2f} m, AUC {row['auc']:.3f}, spread {row['spread']:.3f}",
+              flush=True)
+    print(table([results[name] for name in variants], first="variant"))
+    return 0
+
+
 COLUMNS = {"look": "look", "samples": "val samples", "positives": "collide", "constant": "BCE, constant",
            "bce": "BCE, net", "auc": "AUC, net", "probe_auc": "AUC, linear probe",
+           "spread": "P spread of candidates",
            "val_loss_first": "val loss, epoch 1", "val_loss_best": "best", "val_loss_last": "last"}
 
 
-def table(rows: list[dict[str, Any]]) -> str:
-    return markdown([{"checkpoint": row["checkpoint"], **{title: row[k] if isinstance(row[k], str) else (
-        str(row[k]) if isinstance(row[k], int) else f"{row[k]:.3f}") for k, title in COLUMNS.items()}}
+def table(rows: list[dict[str, Any]], first: str = "checkpoint") -> str:
+    columns = {**COLUMNS, "distance": "m to first collision"} if first == "variant" else COLUMNS
+    return markdown([{first: row[first], **{title: row[k] if isinstance(row[k], str) else (
+        str(row[k]) if isinstance(row[k], int) else f"{row[k]:.3f}") for k, title in columns.items()}}
         for row in rows])
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m research.coll_learning",
                                      description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("checkpoints", nargs="+", type=Path, help="Coll-Q-Net checkpoint folders")
-    parser.add_argument("--json", type=Path, help="also write the rows to this JSON file")
+    verbs = parser.add_subparsers(dest="verb", required=True)
+    measuring = verbs.add_parser("measure", help="measure Coll-Q-Net checkpoints")
+    measuring.add_argument("checkpoints", nargs="+", type=Path, help="Coll-Q-Net checkpoint folders")
+    measuring.add_argument("--json", type=Path, help="also write the rows to this JSON file")
+    running = verbs.add_parser("run", help="train, drive and measure Coll-Q-Net's variants")
+    running.add_argument("like", type=Path, help="the Coll-Q-Net checkpoint whose data and config to vary")
+    running.add_argument("out", type=Path)
+    running.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated, of VARIANTS")
+    running.add_argument("--canyons", default="hard/val:1000-1019", help="val canyons to drive in")
+    running.add_argument("--look", help="the look to drive in (default: the data's)")
     args = parser.parse_args(argv)
 
     def work() -> int:
+        if args.verb == "run":
+            return run(args.like, args.out, tuple(args.variants.split(",")), args.canyons, args.look)
         rows = [row for checkpoint in args.checkpoints for row in measure(checkpoint)]
         print(table(rows))
         if args.json:

@@ -20,6 +20,7 @@ from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
+from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig
 from depthq.evaluate.oracle import OracleWorld, env_config
 from depthq.pipeline.presets import get_preset
@@ -31,6 +32,7 @@ from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
 from research import (
     action_fidelity,
+    coll_learning,
     dagger,
     hard_canyons,
     investigation,
@@ -52,7 +54,7 @@ def test_every_experiment_is_a_module_with_a_command_line_and_docs_hold_no_pytho
     assert not sorted(DOCS.rglob("*.py"))
     names = [f"research.{m.name}" for m in pkgutil.iter_modules(research.__path__)]
     assert {f"research.{name}" for name in (
-        "camera_labels", "looks", "ros_fidelity", "sizing", "weights_check",  # live
+        "camera_labels", "coll_learning", "looks", "ros_fidelity", "sizing", "weights_check",  # live
         "action_fidelity", "hard_canyons", "investigation", "lookahead", "oracle_gap", "precision",
         "val_choices",
     )} <= set(names)
@@ -146,6 +148,41 @@ def test_precision_compares_bf16_decisions_with_the_policys_own(hard_checkpoints
     result = precision.measure(hard_checkpoints[0], frames=8)  # asserts fp32 decides as the policy does
     assert result["frames"] == 8 and 0 <= result["changed"] <= 8
     assert 0 < result["fp32_ms"] < 1e4 and 0 < result["bf16_ms"] < 1e4
+
+
+def test_coll_learning_scores_rank_probabilities_as_the_roc_area_does() -> None:
+    positive = np.array([True, False, True, False])
+    assert coll_learning.auc(np.array([0.9, 0.1, 0.8, 0.2]), positive) == 1.0
+    assert coll_learning.auc(np.array([0.1, 0.9, 0.2, 0.8]), positive) == 0.0
+    assert coll_learning.auc(np.full(4, 0.5), positive) == 0.5  # ties halved
+    assert math.isnan(coll_learning.auc(np.ones(2), np.array([True, True])))
+
+
+@pytest.mark.slow
+def test_coll_learning_measures_a_coll_q_net_and_trains_drives_and_resumes_its_variants(
+    hard_data: Path, tmp_path: Path
+) -> None:
+    like = train(TrainConfig(model="coll", data=str(hard_data), **TOY_TRAINING), tmp_path / "coll",
+                 progress=False)
+    (row,) = coll_learning.measure(like)
+    assert row["look"] == Dataset.open(hard_data).config["env"]["world"]["look"]
+    assert row["samples"] > 0 and 0 <= row["positives"] <= 1
+    assert 0 <= row["spread"] <= 1 and row["constant"] > 0 and row["bce"] > 0
+    with pytest.raises(ConfigError, match="not a Coll-Q-Net"):
+        coll_learning.measure(train(TrainConfig(model="depth", data=str(hard_data), **TOY_TRAINING),
+                                    tmp_path / "depth", progress=False))
+    out = tmp_path / "chances"
+    argv = ["run", str(like), str(out), "--variants", "pinned,final", "--canyons", "hard/val:1000"]
+    assert coll_learning.main(argv) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert set(results) == {"pinned", "final"} and not (out / "models" / "final").exists()  # one training
+    summary = json.loads((out / "eval" / "final" / "summary.json").read_text())
+    assert summary["config"]["weights"] == "final" and summary["config"]["canyons"] == ["hard/val:1000"]
+    pinned = out / "eval" / "pinned" / "summary.json"
+    stamp = pinned.stat().st_mtime_ns
+    assert coll_learning.main(argv) == 0 and pinned.stat().st_mtime_ns == stamp  # resumed: not driven again
+    assert coll_learning.main(["run", str(like), str(tmp_path / "bad"), "--canyons", "hard/eval:0"]) == 2
+    assert not (tmp_path / "bad").exists()
 
 
 @pytest.mark.slow
