@@ -43,8 +43,12 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import matplotlib
 import numpy as np
 from PIL import Image, ImageDraw
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
 
 from depthq.blocks.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
 from depthq.checksum import read_checked_json, write_checked_json
@@ -75,6 +79,7 @@ from depthq.sim.env import CanyonEnv, EnvConfig
 from depthq.sim.look import BROAD, COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
+from depthq.train.dead_outputs import count_dead_outputs
 from depthq.train.folder import METRICS, read_metrics
 from depthq.train.offline_metric import offline_metric
 from research import camera_labels
@@ -782,6 +787,115 @@ def answers(out: Path, seeds: tuple[int, ...] = (0, 1, 2), randomised: str = TEX
     return [first, second]
 
 
+# Issue #57's bars: a share of the colour-trained net's distance; a multiple of the labeller's colour error.
+RECIPE_SHARE, LABELLER_RATIO = 0.9, 1.3
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def _agreements(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]) -> list[float]:
+    where = diagnosis_folder(out, look, drive)
+    found = [read_checked_json(p, FIX) for seed in seeds
+             if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
+    return [float(f["agreement_decisive"]) for f in found if f.get("agreement_decisive") is not None]
+
+
+def _labeller_median(out: Path, look: str, drive: str, method: str) -> float | None:
+    path = error_path(out, look, drive, method)
+    median = read_json(path)["nearest"]["median"] if path.is_file() else None
+    return None if median is None else float(median)
+
+
+def recipe_answers(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
+                   train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS,
+                   method: str = PINNED_METHOD) -> list[str]:
+    """Issue #57's "done when" of each training look or recipe but the reference (the colour look's
+    camera-label Depth-Q-Net driven in colours), answered from what OUT holds: its camera-label
+    Depth-Q-Net's distance in every driving look against `RECIPE_SHARE` of the reference's and
+    against its own Coll-Q-Net's; its agreement with the depth oracle on decisive steps in the
+    textured and held-out looks against the colour-trained LiDAR-label net's in colours (`diagnose`);
+    its labeller's error there against `LABELLER_RATIO` × its error in colours; its nets' dead outputs."""
+    reference = _mean(_d2c(_distances(out, "camera", COLOURS, COLOURS, seeds)))
+    agreed = _mean(_agreements(out, "depth", COLOURS, COLOURS, seeds))
+    lines = []
+    for look in train_looks:
+        if look == COLOURS:
+            continue
+        drives, shares, ahead = [], [], 0
+        for drive in drive_looks:
+            camera = _mean(_d2c(_distances(out, "camera", look, drive, seeds)))
+            coll = _mean(_d2c(_distances(out, "coll", look, drive, seeds)))
+            if camera is None or reference is None:
+                drives.append(f"{drive} –")
+                continue
+            shares.append(camera / reference)
+            ahead += coll is not None and camera > coll
+            drives.append(f"{drive} {camera / reference:.0%}")
+        held = len(shares) == len(drive_looks) and min(shares) >= RECIPE_SHARE and ahead == len(drive_looks)
+        first = f"**{'yes' if held else 'no'}**" if len(shares) == len(drive_looks) else f"**{NOT_MEASURED}**"
+        text = [f"`{look}`: drives every look at ≥ {RECIPE_SHARE:.0%} of the colour-trained camera-label "
+                f"net's distance in colours ({'–' if reference is None else f'{reference:.2f} m'}) and "
+                f"farther than its Coll-Q-Net? {first} ({', '.join(drives)}; farther than its Coll-Q-Net "
+                f"in {ahead} of {len(drive_looks)})."]
+        hard = [d for d in (TEXTURED, HELDOUT) if d in drive_looks]
+        agreement = {d: _mean(_agreements(out, "camera", look, d, seeds)) for d in hard}
+        if agreed is not None and hard and all(v is not None for v in agreement.values()):
+            verdict = "yes" if all(v >= agreed for v in agreement.values()) else "no"
+            cells = ", ".join(f"{d} {v:.1%}" for d, v in agreement.items())
+            text.append(f"Takes the depth oracle's best action on decisive steps as often as the "
+                        f"colour-trained LiDAR-label net in colours ({agreed:.1%})? **{verdict}** ({cells}).")
+        else:
+            text.append(f"Agreement on decisive steps: **{NOT_MEASURED}** (`{PROG} diagnose`).")
+        own = _labeller_median(out, look, COLOURS, method)
+        errors = {d: _labeller_median(out, look, d, method) for d in hard}
+        if own and hard and all(v is not None for v in errors.values()):
+            verdict = "yes" if all(v <= LABELLER_RATIO * own for v in errors.values()) else "no"
+            cells = ", ".join(f"{d} {v / own:.2f} ×" for d, v in errors.items())
+            text.append(f"Its labeller's error within {LABELLER_RATIO} × its error in colours ({own:.3f} m)? "
+                        f"**{verdict}** ({cells}).")
+        else:
+            text.append(f"Its labeller's error per look: **{NOT_MEASURED}**.")
+        dead = []
+        for seed in seeds:
+            for net in ("depth", "camera"):
+                folder = checkpoints(out, look, runs, seed, method)[net]
+                if (folder / CONFIG).is_file() and (found := count_dead_outputs(folder)) is not None:
+                    dead.append(len(found.dead))
+        text.append(f"Dead outputs: {', '.join(map(str, dead)) if dead else NOT_MEASURED} (per Depth-Q-Net, "
+                    "LiDAR then camera labels per seed, on its validation frames).")
+        lines.append(" ".join(text))
+    return lines
+
+
+def distance_figure(path: Path, out: Path, seeds: tuple[int, ...] = (0, 1, 2),
+                    train_looks: tuple[str, ...] = TRAIN_LOOKS, drive_looks: tuple[str, ...] = DRIVE_LOOKS
+                    ) -> None:
+    """Per net a panel: for each driving look a bar per training look or recipe, the mean distance to
+    the first collision over the seeds evaluated, each seed's a dot."""
+    figure_, axes = plt.subplots(1, len(NETS), figsize=(4.8 * len(NETS), 3.6), sharey=True, squeeze=False)
+    width = 0.8 / len(train_looks)
+    x = np.arange(len(drive_looks))
+    for ax, (net, label) in zip(axes[0], NETS.items(), strict=True):
+        for k, look in enumerate(train_looks):
+            values = [_d2c(_distances(out, net, look, drive, seeds)) for drive in drive_looks]
+            where = x + (k - (len(train_looks) - 1) / 2) * width
+            ax.bar(where, [np.mean(v) if v else 0.0 for v in values], width, label=look)
+            for at, seeds_of in zip(where, values, strict=True):
+                ax.plot([at] * len(seeds_of), seeds_of, "k.", markersize=3)
+        ax.set_xticks(x, drive_looks)
+        ax.set_title(label)
+        ax.set_xlabel("driven in")
+    axes[0][0].set_ylabel("m to the first collision")
+    axes[0][-1].legend(title="trained", fontsize="small")
+    figure_.tight_layout()
+    buffer = io.BytesIO()
+    figure_.savefig(buffer, format="png", dpi=110)
+    plt.close(figure_)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
 def _canyons(out: Path) -> str:
     """The canyons OUT's evaluations drove in, from the first one found ("not yet measured" for none)."""
     for path in sorted(Path(out).glob("*/eval_*/*/summary.json")):
@@ -806,8 +920,11 @@ def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
              "paired differences by training seed. The issue asks its answers of the hard `eval` canyons, "
              "500 runs, 3 seeds.")
     diagnosed = [r for r in diagnosis_rows(out, seeds, train_looks, drive_looks) if r["seeds"] != "0"]
+    distance_figure(out / "distance_by_look.png", out, seeds, train_looks, drive_looks)
     sections = [
         ("Done when (issue #45)", answers(out, seeds), None),
+        ("Done when (issue #57), per recipe",
+         recipe_answers(out, runs, seeds, train_looks, drive_looks, method), None),
         ("Every net × training look × driving look", [],
          table_rows(out, runs, seeds, train_looks, drive_looks)),
         ("The held-out look's cost, and what textured training gives back", [], transfer_rows(out, seeds)),
@@ -836,11 +953,14 @@ def report(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
             lines += [*(f"- {t}" for t in texts), ""]
         else:
             lines += [*(f"{t}\n" for t in texts), markdown(rows)]
+    drawn = "Distance per driving look"
+    lines += [f"## {drawn}", "", f"![{drawn}](distance_by_look.png)", ""]
     lines += [f"## {pose}", "", f"![{pose}](looks.png)", ""]
     atomic_write_bytes(out / "report.md", "\n".join(lines).encode())
     html_sections = [(title, "".join(f"<p>{html.escape(t.replace('**', ''))}</p>" for t in texts)
                       + (page.table(rows) if rows is not None else "")) for title, texts, rows in sections]
     html_sections[0] = (html_sections[0][0], f"<p>{html.escape(intro)}</p>" + html_sections[0][1])
+    html_sections.append((drawn, page.img(out / "distance_by_look.png", drawn.lower())))
     html_sections.append((pose, page.img(out / "looks.png", pose.lower())))
     atomic_write_bytes(out / "report.html", page.render(f"depthq looks experiment — {out.name}",
                                                         html_sections).encode())

@@ -64,6 +64,10 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     text = (out / "report.md").read_text()
     assert "| Depth-Q-Net, camera labels | textured |" in text and "| floor, trained in textured |" in text
     assert (out / "looks.png").is_file() and "data:image/png;base64," in (out / "report.html").read_text()
+    assert (out / "distance_by_look.png").is_file() and "![Distance per driving look]" in text
+    (recipe,) = (line for line in text.splitlines() if line.startswith("- `textured`: drives every look"))
+    assert "**not yet measured**" in recipe  # no colour-trained reference in OUT
+    assert "Dead outputs: " in recipe and looks.NOT_MEASURED not in recipe.split("Dead outputs: ")[1]
     assert f"| Depth-Q-Net, camera labels | textured | {predicted['value']:.3f} | abs_diff | – |" in text
     # how far training carried: the Coll-Q-Net's validation loss after its one epoch, from its metrics.csv
     logged = (out / "textured" / "sweep" / "models" / "coll_n3_s0" / "metrics.csv").read_text().splitlines()
