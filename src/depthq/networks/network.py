@@ -110,8 +110,8 @@ class Network(Generic[S]):
         """Its own rules for a head (the shape's are `HeadConfig`'s): by default the paper's head of one
         step."""
         if config.lookahead != 1:
-            raise ConfigError(f"HeadConfig.lookahead: {self.title} predicts one step, so its lookahead must be "
-                              f"1, got {config.lookahead!r}")
+            raise ConfigError(f"HeadConfig.lookahead: {self.title} predicts one step, so its lookahead "
+                              f"must be 1, got {config.lookahead!r}")
         if config.form != "concat":
             raise ConfigError(f"HeadConfig.form {config.form!r}: {self.title} has only 'concat'")
         if config.output_bias:
