@@ -24,6 +24,7 @@ from typing import Any
 from depthq.configio import read_json, write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.networks import DepthSettings
 from depthq.pipeline.sweep import parse_ints
 from depthq.report.cells import mean_interval
 from depthq.sim.canyon import split_family
@@ -50,7 +51,8 @@ def run(data: Path, out: Path, seeds: tuple[int, ...], runs: int, canyons: str, 
         for gradient in gradients:
             name = name_of(gradient, runs, seed)
             folder = out / "models" / name
-            train(TrainConfig(model="depth", data=str(data), runs=runs, seed=seed, bin_gradient=gradient),
+            train(TrainConfig(model="depth", data=str(data), runs=runs, seed=seed,
+                              settings=DepthSettings(bin_gradient=gradient)),
                   folder, progress=False)
             row = {**results.get(name, {}), "gradient": gradient, "seed": seed, "runs": runs}
             found = count_dead_outputs(folder)

@@ -61,7 +61,7 @@ from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.evaluate.oracle import Oracle
 from depthq.evaluate.probe import agreement_file, measure_agreement
-from depthq.flags import build_config
+from depthq.flags import build_config, config_flags, get_path
 from depthq.labellers.labeller import CONFIG as LABELLER_CONFIG
 from depthq.labellers.labeller import LabellerConfig, check_applicable, load_labeller
 from depthq.lock import exclusive
@@ -238,19 +238,19 @@ NOT_MEASURED = "not yet measured"
 # defaults no longer hold (none on that commit), so the documented command trains the same nets on a
 # later commit. The camera-label Depth-Q-Net trains as the LiDAR one (`camera_labels.camera_config`),
 # on camera labels.
-_PINNED_DEPTH: dict[str, Any] = {
+_PINNED: dict[str, Any] = {
     "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": 0.1, "rho": 0.95,
     "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "tune_stages": 0,
-    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
-    "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": "depth_first",
-    "output_bias": 0.0, "bin_gradient": "relu", "bootstrap": 0.0, "mirror": False, "labels": "lidar",
-    "samples.horizon": 5, "samples.min_frames": 20, "samples.every_run_end": True,
-    "samples.action_clip": 1.0, "samples.action_lag": 0, "weights": "average", "snapshots": [],
-    "average": 0.25, "precision": "fp32",
+    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "feature_projection": 0, "hidden": 4096,
+    "mirror": False, "labels": "lidar", "samples.horizon": 5, "samples.min_frames": 20,
+    "samples.every_run_end": True, "samples.action_clip": 1.0, "samples.action_lag": 0, "snapshots": [],
+    "precision": "fp32",
 }
-PINNED_TRAINING: dict[str, dict[str, Any]] = {
-    "depth": _PINNED_DEPTH,
-    "coll": {**_PINNED_DEPTH, "head_form": "concat", "weights": "best", "average": 0.0},  # every field
+PINNED_TRAINING: dict[str, dict[str, Any]] = {  # every field, and each network's own settings
+    "depth": {**_PINNED, "depth.depth_loss": "original", "depth.lookahead": 1,
+              "depth.lookahead_discount": 1.0, "depth.head_form": "depth_first", "depth.output_bias": 0.0,
+              "depth.bin_gradient": "relu", "depth.bootstrap": 0.0, "weights": "average", "average": 0.25},
+    "coll": {**_PINNED, "weights": "best", "average": 0.0},
 }
 # The monodepth labeller's settings (LabellerConfig, besides its data and method), pinned as above.
 PINNED_LABELLER: dict[str, Any] = {
@@ -266,25 +266,26 @@ _GONE = object()
 
 
 def _flat(config: Any) -> dict[str, Any]:
-    """A config's fields by path ('samples.horizon'), JSON values; a training's "lr" its effective rate."""
-    out = field_paths(json.loads(json.dumps(asdict(config))))
-    if isinstance(config, TrainConfig):
-        out["lr"] = config.learning_rate
-    return out
+    """A config's fields by path ('samples.horizon', 'depth.lookahead'), JSON values; a training's "lr" its
+    effective rate."""
+    if isinstance(config, TrainConfig):  # its network's own settings by their paths ('depth.lookahead')
+        paths = {f.path: get_path(config, f.path) for f in config_flags(TrainConfig, config)}
+        return {**json.loads(json.dumps(paths)), "lr": config.learning_rate}
+    return field_paths(json.loads(json.dumps(asdict(config))))
 
 
 def _restoring(pins: dict[str, dict[str, Any]], built: dict[str, dict[str, Any]],
                given: set[str]) -> tuple[tuple[str, Any], ...]:
     """The settings (field path, value) that bring each built config back to its pin, but for the
     fields `given` on the command line; every config takes them all (a sweep's settings are every
-    net's), so a setting must suit each pin."""
+    net's, a network's own settings its alone), so a setting must suit each pin that has it."""
     needed: dict[str, Any] = {}
     for name, pin in pins.items():
         for key, value in pin.items():
             if key not in given and built[name].get(key, _GONE) != value:  # gone: build_config names it
                 needed[key] = value
     for key, value in needed.items():
-        if clash := [name for name, pin in pins.items() if pin[key] != value]:
+        if clash := [name for name, pin in pins.items() if pin.get(key, value) != value]:
             raise ConfigError(f"the defaults moved away from the looks experiment's pinned {key} differently "
                               f"for {', '.join(clash)}: pin that setting per network in "
                               f"research.looks")

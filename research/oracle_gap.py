@@ -70,7 +70,7 @@ def paper_head(name: str, *sets: str) -> Candidate:
     """A candidate on the paper's head (the image feature and the action into one MLP). Each such row
     names the head: the depth-first head has been `--model depth`'s default since this ladder picked
     it, and the rows must keep meaning what they measured."""
-    return Candidate(name, ("head_form=concat", *sets))
+    return Candidate(name, ("depth.head_form=concat", *sets))
 
 
 def final_weights(name: str, *sets: str) -> Candidate:
@@ -85,19 +85,20 @@ CANDIDATES = (
     paper_head("Depth-Q-Net, the paper's head"),
     paper_head("keep the samples before each run's end (horizon 1)", "samples.horizon=1"),
     paper_head("head width 1024", "hidden=1024"),
-    Candidate("per-action head (scene and action apart)", ("head_form=per_action",)),
+    Candidate("per-action head (scene and action apart)", ("depth.head_form=per_action",)),
     paper_head("4 × 4 grid feature, head width 1024", "trunk=efficientnet_lite0_grid", "hidden=1024"),
-    paper_head("relative depth loss", "depth_loss=relative"),
-    paper_head("bootstrapped value, γ = 0.5", "bootstrap=0.5"),
-    paper_head("bootstrapped value, γ = 0.9", "bootstrap=0.9"),
-    paper_head("bootstrapped value, γ = 0.95", "bootstrap=0.95"),
-    paper_head("bootstrapped value, γ = 0.98", "bootstrap=0.98"),
-    paper_head("bootstrapped value γ = 0.9, relative loss", "bootstrap=0.9", "depth_loss=relative"),
+    paper_head("relative depth loss", "depth.depth_loss=relative"),
+    paper_head("bootstrapped value, γ = 0.5", "depth.bootstrap=0.5"),
+    paper_head("bootstrapped value, γ = 0.9", "depth.bootstrap=0.9"),
+    paper_head("bootstrapped value, γ = 0.95", "depth.bootstrap=0.95"),
+    paper_head("bootstrapped value, γ = 0.98", "depth.bootstrap=0.98"),
+    paper_head("bootstrapped value γ = 0.9, relative loss", "depth.bootstrap=0.9",
+               "depth.depth_loss=relative"),
     paper_head("mirrored samples", "mirror=true"),
-    paper_head("mirrored samples, bootstrapped value γ = 0.9", "mirror=true", "bootstrap=0.9"),
+    paper_head("mirrored samples, bootstrapped value γ = 0.9", "mirror=true", "depth.bootstrap=0.9"),
     Candidate("Coll-Q-Net, mirrored samples", ("mirror=true",), net="coll"),
     final_weights("depth-first head (perception, then dynamics), final weights"),
-    final_weights("depth-first head, output bias 1 m (no dead bins)", "output_bias=1.0"),
+    final_weights("depth-first head, output bias 1 m (no dead bins)", "depth.output_bias=1.0"),
     final_weights("depth-first head, width 1024", "hidden=1024"),
     Candidate("depth-first head, mean of the last quarter's weights (the default)"),
 )

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -71,14 +72,16 @@ def lidar_table(dataset: Dataset, kind: str) -> FeatureTable:
 def train_head(dataset: Dataset, kind: str, net: str, config: TrainConfig) -> torch.nn.Module:
     """`config`'s head trained on `kind` input as `depthq train` trains one on cached features."""
     table = lidar_table(dataset, kind)
-    arrays = view_arrays(dataset, "train", config.runs, get_network(net).view, config.samples)
+    network = get_network(net)
+    arrays = view_arrays(dataset, "train", config.runs, type(network).target, config.samples)
     samples = FeatureSamples(arrays, table, "train")
     torch.manual_seed(config.seed)
     # One step, the action appended, the input unprojected.
-    head = build_head(HeadConfig(net, table.features.shape[1], hidden=config.hidden, dropout=0.0,
-                                 action_scale=config.action_scale, lookahead=1, feature_projection=0,
-                                 form="concat", output_bias=config.output_bias,
-                                 bin_gradient=config.bin_gradient))
+    paper = HeadConfig(net, table.features.shape[1], hidden=config.hidden, dropout=0.0,
+                       action_scale=config.action_scale, lookahead=1, feature_projection=0, form="concat",
+                       output_bias=0.0, bin_gradient="relu")
+    own = network.head_config(paper, config.settings)  # its bins' bias and gradient
+    head = build_head(replace(own, lookahead=1, form="concat"))
     model = torch.nn.Module()
     model.head = head  # `train_step` runs the head on `samples.trunk_features(model, batch)`: the cached ones
     optimizer = make_optimizer(head, config.learning_rate, config.weight_decay, config.rho, config.eps)

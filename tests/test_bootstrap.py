@@ -13,7 +13,8 @@ import torch
 from paper_head import paper_head
 
 from depthq.errors import ConfigError
-from depthq.networks import build_head
+from depthq.flags import build_config
+from depthq.networks import DepthSettings, build_head
 from depthq.train.bootstrap import bootstrapped_targets, greedy_bins
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train
@@ -47,12 +48,12 @@ def test_the_bootstrapped_target_by_hand() -> None:
 
 
 @pytest.mark.parametrize("changes", [
-    {"bootstrap": 1.0}, {"bootstrap": -0.1}, {"bootstrap": 0.5, "model": "coll"},
-    {"bootstrap": 0.5, "lookahead": 2},
+    {"depth.bootstrap": 1.0}, {"depth.bootstrap": -0.1}, {"depth.bootstrap": 0.5, "model": "coll"},
+    {"depth.bootstrap": 0.5, "depth.lookahead": 2},
 ])
 def test_bad_bootstrap_settings_are_refused_by_value(changes: dict) -> None:
     with pytest.raises(ConfigError, match="bootstrap"):
-        TrainConfig(**{"model": "depth", "data": "d", **changes})
+        build_config(TrainConfig, {"model": "depth", "data": "d", **changes})
 
 
 @pytest.mark.slow
@@ -62,10 +63,11 @@ def test_a_bootstrapped_training_starts_as_the_plain_one_and_then_departs(
     fast = {"model": "depth", "data": str(small_dataset), "epochs": 3, "train_batches": 4, "val_batches": 2,
             "batch_size": 16, "hidden": 64}
     plain = train(TrainConfig(**fast), tmp_path / "plain", progress=False)
-    boot = train(TrainConfig(**fast, bootstrap=0.9), tmp_path / "boot", progress=False)
+    boot = train(TrainConfig(**fast, settings=DepthSettings(bootstrap=0.9)), tmp_path / "boot",
+                 progress=False)
     config = json.loads((boot / "config.json").read_text())
-    assert config["train"]["bootstrap"] == 0.9 and config["head"]["hidden"] == 64
-    assert "bootstrap" not in json.loads((plain / "config.json").read_text())["train"]  # old bytes kept
+    assert config["train"]["depth"]["bootstrap"] == 0.9 and config["head"]["hidden"] == 64
+    assert "bootstrap" not in json.loads((plain / "config.json").read_text())["train"]["depth"]  # unset
 
     def losses(folder: Path) -> list[tuple[float, float]]:
         rows = [line.split(",") for line in (folder / "metrics.csv").read_text().splitlines()[1:]]
@@ -80,10 +82,10 @@ def test_a_bootstrapped_training_starts_as_the_plain_one_and_then_departs(
 @pytest.mark.slow
 def test_a_depth_first_training_fits_both_parts_and_drives(small_dataset: Path, tmp_path: Path) -> None:
     config = TrainConfig(model="depth", data=str(small_dataset), epochs=4, train_batches=6, val_batches=2,
-                         batch_size=16, hidden=64, head_form="depth_first")
+                         batch_size=16, hidden=64, settings=DepthSettings(head_form="depth_first"))
     folder = train(config, tmp_path / "df", progress=False)
     recorded = json.loads((folder / "config.json").read_text())
-    assert recorded["head"]["form"] == "depth_first" and recorded["train"]["head_form"] == "depth_first"
+    assert recorded["head"]["form"] == recorded["train"]["depth"]["head_form"] == "depth_first"
     rows = [line.split(",") for line in (folder / "metrics.csv").read_text().splitlines()[1:]]
     train_losses = [float(r[1]) for r in rows]
     assert train_losses[-1] < train_losses[0]  # perception and dynamics both learn

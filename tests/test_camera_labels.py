@@ -19,6 +19,7 @@ from depthq.blocks.checkpoint import read_config
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.runfile import file_sha256, write_labelled
+from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.labellers.labeller import (
@@ -111,10 +112,11 @@ def test_a_labelling_stopped_before_its_manifest_is_resumed(labelled: Path, smal
 def test_an_old_dataset_reads_unchanged_and_refuses_camera_training(small_dataset: Path) -> None:
     dataset = Dataset.open(small_dataset)
     assert all(dataset.read_run(e, images=False).camera is None for e in dataset.entries())
-    default, lidar = (view_arrays(dataset, "val", None, "bins", **kw) for kw in ({}, {"labels": "lidar"}))
+    default, lidar = (view_arrays(dataset, "val", None, bins_target, **kw)
+                      for kw in ({}, {"labels": "lidar"}))
     assert np.array_equal(default["target"], lidar["target"], equal_nan=True)
     with pytest.raises(ConfigError, match=f"{small_dataset} has no camera labels.*depthq label"):
-        view_arrays(dataset, "train", None, "bins", labels="camera")
+        view_arrays(dataset, "train", None, bins_target, labels="camera")
     with pytest.raises(ConfigError, match="Coll-Q-Net learns only from labels"):
         TrainConfig(model="coll", data=str(small_dataset), labels="camera")
     with pytest.raises(ConfigError, match=r"train\.labels must be one of"):
@@ -128,8 +130,8 @@ def test_a_depth_q_net_trains_on_camera_labels_and_drives(labelled: Path, labell
     from depthq.train.trainer import train
 
     dataset = Dataset.open(labelled)
-    camera = view_arrays(dataset, "train", None, "bins", labels="camera")
-    lidar = view_arrays(dataset, "train", None, "bins")
+    camera = view_arrays(dataset, "train", None, bins_target, labels="camera")
+    lidar = view_arrays(dataset, "train", None, bins_target)
     assert not np.array_equal(camera["target"], lidar["target"])  # the targets are the camera's
     assert np.array_equal(camera["frame_id"], lidar["frame_id"])  # of the same samples
     out = train(TrainConfig(model="depth", data=str(labelled), labels="camera", **TOY_TRAINING),

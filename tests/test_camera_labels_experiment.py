@@ -64,7 +64,7 @@ def test_the_experiment_labels_a_copy_trains_drives_tabulates_and_resumes(
     sweep_train = read_config(smoke / "models" / "depth_n6_s0")["train"]
     assert train["labels"] == "camera" and train["data"] == str((out / "floor" / "data").resolve())
     assert (train["epochs"], train["train_batches"], train["runs"], train["seed"]) == (1, 2, 6, 0)
-    assert train["head_form"] == sweep_train["head_form"] and train["lr"] == sweep_train["lr"]
+    assert train["depth"] == sweep_train["depth"] and train["lr"] == sweep_train["lr"]
     evaluations = {name: out / where / "eval" / model for name, where, model in (
         ("camera", "floor", "depth_n6_s0"), ("lidar", "lidar", "depth_n6_s0"), ("coll", "lidar", "coll_n6_s0")
     )}

@@ -21,7 +21,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, at_policy_rate, default_canyons, evaluate
-from depthq.networks import load_qnet
+from depthq.networks import DepthSettings, load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.sim.world import DEFAULT_DECISION_HZ
 from depthq.train import trainer
@@ -36,6 +36,9 @@ FAST = {"train_batches": 1, "val_batches": 1, "batch_size": 16}  # an Adadelta s
 def data(small_dataset: Path) -> Path:
     """conftest's small dataset (6 + 2 runs at the default rate, features cached); never changed."""
     return small_dataset
+
+
+CONCAT = DepthSettings(head_form="concat")  # the paper's head
 
 
 def _config(data: Path, **kwargs: object) -> TrainConfig:
@@ -69,7 +72,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert policy["bins"]["clip"] == 2.0
     # The default Depth-Q-Net: the depth-first head, acting with its last quarter's weight average
     # (of 1 epoch: its last); all recorded.
-    assert (record["train"]["head_form"], record["head"]["form"]) == ("depth_first", "depth_first")
+    assert (record["train"]["depth"]["head_form"], record["head"]["form"]) == ("depth_first", "depth_first")
     assert (record["train"]["average"], record["train"]["weights"]) == (0.25, "average")
     assert record["provenance"]["package"] == "depthq"
     assert _equal(_tensors(a / "ckpt" / "average.safetensors"), _tensors(a / "ckpt" / "last.safetensors"))
@@ -133,7 +136,7 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
 @pytest.mark.slow
 def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: Path) -> None:
     # The paper's head: the only one a checkpoint of an older format can hold.
-    out = train(_config(data, epochs=1, head_form="concat"), tmp_path / "run", progress=False)
+    out = train(_config(data, epochs=1, settings=CONCAT), tmp_path / "run", progress=False)
     assert read_json(out / "config.json")["train"]["weights"] == "best"
     record = read_json(out / "config.json")
 
@@ -147,14 +150,16 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     # A sweep finds a finished folder trained otherwise than the model of that name now means (the
     # paper's head, before the depth-first head became the default): an error, not a reused model.
     from depthq.pipeline.stages import _trained
-    with pytest.raises(ConfigError, match=r"differs in: average, head_form, weights"):
+    with pytest.raises(ConfigError, match=r"differs in: average, depth\.head_form, weights"):
         _trained(_config(data, epochs=1), out)
-    assert _trained(_config(data, epochs=1, head_form="concat"), out)
+    assert _trained(_config(data, epochs=1, settings=CONCAT), out)
 
-    # Version 3 before `head_form` was recorded: the paper's head, its best weights.
+    # Version 3 before `head_form` was recorded (and Depth-Q-Net's settings were among the others, #56):
+    # the paper's head, its best weights.
     before = tmp_path / "v3"
     shutil.copytree(out, before)
-    v3 = {**record, "train": {k: v for k, v in record["train"].items() if k != "head_form"}}
+    flat_own = {k: v for k, v in record["train"]["depth"].items() if k != "head_form"}
+    v3 = {**record, "train": {k: v for k, v in record["train"].items() if k != "depth"} | flat_own}
     v3["head"] = {k: v for k, v in record["head"].items() if k != "form"}
     (before / "config.json").write_text(json.dumps(unchecked(v3)))
     assert read_config(before)["train"] == record["train"]
@@ -173,8 +178,8 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert upgraded["policy"] == record["policy"]
     head = {f"head.{k}": v for k, v in QNetPolicy.from_checkpoint(renamed).net.head.state_dict().items()}
     assert _equal(head, _tensors(renamed / "last.safetensors"))
-    assert _trained(_config(data, epochs=1, head_form="concat", weights="final"), renamed)
-    resumed = train(_config(data, epochs=2, head_form="concat", weights="final"), renamed, progress=False)
+    assert _trained(_config(data, epochs=1, settings=CONCAT, weights="final"), renamed)
+    resumed = train(_config(data, epochs=2, settings=CONCAT, weights="final"), renamed, progress=False)
     assert resumed == renamed
     assert read_json(renamed / "config.json")["train"]["weights"] == "final"
 
@@ -187,9 +192,9 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     (flat / "config.json").write_text(json.dumps(unchecked({**record, "train": flat_train})))
     assert read_config(flat)["train"] == record["train"]
     assert load_qnet(flat)[1]["train"]["samples"]["horizon"] == 5
-    assert _trained(_config(data, epochs=1, head_form="concat"), flat)
+    assert _trained(_config(data, epochs=1, settings=CONCAT), flat)
     with pytest.raises(ConfigError, match=r"differs in: samples\.horizon\)"):
-        _trained(_config(data, epochs=1, head_form="concat", samples=SampleConfig(horizon=3)), flat)
+        _trained(_config(data, epochs=1, settings=CONCAT, samples=SampleConfig(horizon=3)), flat)
 
     # Version 2, the layout before `dataset` and `policy`: its rate from its dataset's manifest.
     old = tmp_path / "v2"
@@ -203,7 +208,7 @@ def test_a_future_format_is_refused_and_an_old_one_loads(data: Path, tmp_path: P
     assert upgraded["policy"] == record["policy"] and upgraded["train"] == record["train"]
     head = {f"head.{k}": v for k, v in net.head.state_dict().items()}
     assert _equal(_tensors(old / "best.safetensors"), head)
-    assert train(_config(data, epochs=2, head_form="concat"), old, progress=False) == old  # resumed
+    assert train(_config(data, epochs=2, settings=CONCAT), old, progress=False) == old  # resumed
     assert read_json(old / "config.json")["format_version"] == 3
 
 

@@ -26,14 +26,15 @@ def test_every_train_config_field_is_a_flag_with_its_default(capsys: pytest.Capt
     from dataclasses import MISSING, fields
 
     from depthq.cli import build_parser
+    from depthq.configio import TAGGED
     from depthq.flags import config_from_args
     from depthq.train.config import TrainConfig
 
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     out = capsys.readouterr().out
-    names = [f.name for f in fields(TrainConfig)]
-    assert all(f"--{name.replace('_', '-')}" in out for name in names)
+    names = [f.name for f in fields(TrainConfig) if TAGGED not in f.metadata]  # `settings`: --depth.*
+    assert all(f"--{name.replace('_', '-')}" in out for name in [*names, "depth.lookahead"])
     args = build_parser("train").parse_args(["train", "--model", "depth", "--data", "d", "--out", "o"])
     assert config_from_args(TrainConfig, args) == TrainConfig(model="depth", data="d")
     for f in fields(TrainConfig):  # a flag not given sets nothing: the config takes the class's default
@@ -47,11 +48,11 @@ def test_a_flag_sets_its_field_in_either_spelling() -> None:
     from depthq.flags import config_from_args
     from depthq.train.config import TrainConfig
 
-    argv = ["train", "--model", "coll", "--data", "d", "--out", "o", "--action-scale", "3", "--lr", "none",
+    argv = ["train", "--model", "depth", "--data", "d", "--out", "o", "--action-scale", "3", "--lr", "none",
             "--depth_loss", "valid_mean", "--epochs", "7", "--no-every-run-end", "--action_lag", "1"]
     config = config_from_args(TrainConfig, build_parser("train").parse_args(argv))
-    assert (config.model, config.data, config.action_scale, config.lr) == ("coll", "d", 3.0, None)
-    assert (config.depth_loss, config.epochs) == ("valid_mean", 7)
+    assert (config.model, config.data, config.action_scale, config.lr) == ("depth", "d", 3.0, None)
+    assert (config.settings.depth_loss, config.epochs) == ("valid_mean", 7)
     assert (config.samples.every_run_end, config.samples.action_lag) == (False, 1)
 
 

@@ -18,7 +18,14 @@ from depthq.data import runfile as runfile_module
 from depthq.data.manifest import MANIFEST, Dataset
 from depthq.data.run import Run, RunMeta
 from depthq.data.runfile import JPEG_MAX_MEAN_ABS_ERROR, RunReader, read_frame, read_run, write_run
-from depthq.data.samples import coll_sample_indices, collision_targets, depth_sample_indices, usable
+from depthq.data.samples import (
+    bins_target,
+    coll_sample_indices,
+    collision_target,
+    collision_targets,
+    depth_sample_indices,
+    usable,
+)
 from depthq.data.stats import dataset_stats
 from depthq.data.subsets import select_runs
 from depthq.data.views import FrameView, run_then_frame, view_arrays
@@ -102,9 +109,9 @@ def test_short_runs_are_left_out(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [21, 19, 20, 25], val_lengths=(19,))
     assert [usable(e, 20) for e in dataset.entries("train")] == [True, False, True, True]
     with pytest.raises(ConfigError, match="no usable val runs"):
-        FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
+        FrameView(dataset, "val", view_arrays(dataset, "val", None, bins_target, CONFIG))
     assert [e.index for e in select_runs(dataset, "train", None, 20)] == [0, 2, 3]
-    arrays = view_arrays(dataset, "train", None, "collision", CONFIG)
+    arrays = view_arrays(dataset, "train", None, collision_target, CONFIG)
     assert arrays["run_index"].tolist() == [0, 2, 3]
     assert len(arrays["frame_id"]) == 20 + 19 + 24
 
@@ -262,7 +269,7 @@ def test_loading_a_damaged_file_raises(tmp_path: Path) -> None:
     with pytest.raises(DataError, match=f"{flipped}: corrupted"):
         dataset.reader(entries[1])
     with pytest.raises(DataError, match=str(truncated)):
-        FrameView(dataset, "train", view_arrays(dataset, "train", 2, "bins", CONFIG))
+        FrameView(dataset, "train", view_arrays(dataset, "train", 2, bins_target, CONFIG))
     with pytest.raises(DataError, match=f"{truncated}: not a readable HDF5"):
         read_run(truncated)  # without the manifest's hash, h5py's own error is still a DataError
 
@@ -301,7 +308,7 @@ def test_same_runs_give_the_same_dataset_bytes(tmp_path: Path) -> None:
 def test_views_give_the_right_targets(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [20, 24, 21])  # runs 0, 1 bump, run 2 time limit
     runs = {e.index: dataset.read_run(e) for e in dataset.entries("train")}
-    depth = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "bins", CONFIG))
+    depth = FrameView(dataset, "train", view_arrays(dataset, "train", 3, bins_target, CONFIG))
     assert len(depth) == 14 + 18 + 15  # the original drops the last 5 samples of every run
     for i in range(len(depth)):
         run_id, t = int(depth.arrays["run_id"][i]), int(depth.arrays["frame_id"][i])
@@ -309,18 +316,18 @@ def test_views_give_the_right_targets(tmp_path: Path) -> None:
         np.testing.assert_array_equal(target, runs[run_id].bins[t + 1])
         assert action == runs[run_id].actions[t]
         np.testing.assert_array_equal(image, runs[run_id].images[t])
-    coll = FrameView(dataset, "train", view_arrays(dataset, "train", 3, "collision", CONFIG))
+    coll = FrameView(dataset, "train", view_arrays(dataset, "train", 3, collision_target, CONFIG))
     assert len(coll) == 19 + 23 + 20
     targets = coll.arrays["target"]
     offsets = coll.arrays["run_offsets"]
     assert targets[offsets[0] : offsets[1]].tolist() == [0] * 14 + [1] * 5
     assert targets[offsets[2] : offsets[3]].tolist() == [0] * 15 + [1] * 5  # every run's end, as the original
-    val = FrameView(dataset, "val", view_arrays(dataset, "val", None, "bins", CONFIG))
+    val = FrameView(dataset, "val", view_arrays(dataset, "val", None, bins_target, CONFIG))
     assert set(val.arrays["run_id"].tolist()) == {0} and len(val) == 16
     # Collision targets on bumps only: the time-limited run keeps all its samples, each 0.
     bumps_only = replace(CONFIG, every_run_end=False)
-    assert len(view_arrays(dataset, "train", 3, "bins", bumps_only)["frame_id"]) == 14 + 18 + 20
-    coll = view_arrays(dataset, "train", 3, "collision", bumps_only)
+    assert len(view_arrays(dataset, "train", 3, bins_target, bumps_only)["frame_id"]) == 14 + 18 + 20
+    coll = view_arrays(dataset, "train", 3, collision_target, bumps_only)
     assert coll["target"][coll["run_offsets"][2] :].sum() == 0
 
 
@@ -332,20 +339,20 @@ def test_actions_are_clipped_and_can_lag_one_frame(tmp_path: Path) -> None:
     fast = Run(**{**{f: getattr(run, f) for f in ("meta", "images", "scans", "bins", "poses", "times")},
                   "actions": (run.actions * 2.5).astype(np.float32)})
     dataset.add_run(fast, jpeg_quality=90)
-    depth = view_arrays(dataset, "train", None, "bins", CONFIG)
+    depth = view_arrays(dataset, "train", None, bins_target, CONFIG)
     np.testing.assert_array_equal(depth["action"], np.clip(fast.actions[:16], -1, 1))
     assert np.abs(fast.actions[:-1]).max() > 1
-    lagged = view_arrays(dataset, "train", None, "bins", replace(CONFIG, action_lag=1))
+    lagged = view_arrays(dataset, "train", None, bins_target, replace(CONFIG, action_lag=1))
     np.testing.assert_array_equal(lagged["frame_id"], np.arange(1, 16))
     np.testing.assert_array_equal(lagged["action"], np.clip(fast.actions[:15], -1, 1))
     np.testing.assert_array_equal(lagged["target"], fast.bins[2:17])
-    coll = view_arrays(dataset, "train", None, "collision", replace(CONFIG, action_lag=1))
+    coll = view_arrays(dataset, "train", None, collision_target, replace(CONFIG, action_lag=1))
     assert coll["frame_id"][0] == 1 and coll["target"].tolist() == [0] * 15 + [1] * 5
 
 
 def test_views_sample_deterministically(tmp_path: Path) -> None:
     dataset = make_dataset(tmp_path / "d", [20, 30, 22, 21])
-    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, "bins", CONFIG))
+    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, bins_target, CONFIG))
 
     def batches(seed: int, workers: int = 0) -> list[torch.Tensor]:
         loader = DataLoader(view, batch_size=8, sampler=view.sampler(32, seed), num_workers=workers)

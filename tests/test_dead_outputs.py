@@ -13,6 +13,7 @@ import pytest
 
 from depthq.cli import main
 from depthq.data.manifest import Dataset
+from depthq.networks import DepthSettings
 from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import count_dead_outputs, dead_outputs
@@ -74,7 +75,8 @@ def test_a_straight_through_bin_gradient_leaves_no_output_dead(small_dataset, tm
     the straight-through gradient keeps every one alive."""
     config = TrainConfig(model="depth", data=str(small_dataset), epochs=1, train_batches=20, val_batches=1,
                          batch_size=16)
-    dead = {gradient: count_dead_outputs(train(replace(config, bin_gradient=gradient), tmp_path / gradient,
+    dead = {gradient: count_dead_outputs(train(replace(config, settings=DepthSettings(bin_gradient=gradient)),
+                                               tmp_path / gradient,
                                                progress=False)).dead
             for gradient in ("relu", "straight_through")}
     assert dead["relu"] and dead["straight_through"] == ()

@@ -18,6 +18,7 @@ import numpy as np
 from depthq.cli import main
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target, collision_target
 from depthq.data.stats import dataset_stats
 from depthq.data.views import view_arrays
 from depthq.sim.canyon import CanyonId, generate_canyon
@@ -56,7 +57,7 @@ def digests(root: Path) -> dict[str, str]:
         meta = json.dumps(asdict(run.meta), sort_keys=True, default=int)
         runs += [meta, run.scans, run.bins, run.actions, run.poses, run.times]
     targets = [view_arrays(dataset, split, None, kind, DataConfig())[key]
-              for split in ("train", "val") for kind in ("bins", "collision")
+              for split in ("train", "val") for kind in (bins_target, collision_target)
               for key in ("run_offsets", "frame_id", "action", "target")]
     # Table II's numbers; not the dataset's path, nor its bytes per frame (JPEG: the renderer's pixels)
     stats = dataset_stats(dataset, DataConfig())

@@ -123,3 +123,42 @@ def test_extending_pages_policy_loop_drives_a_canyon() -> None:
     scope: dict = {"my_policy": DepthHeuristic()}
     exec(loop, scope)  # the project's own docs page
     assert scope["done"] and scope["info"]["distance"] > 5.0
+
+
+def test_extending_pages_network_loads_through_its_entry_point(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Extending's third network, written as its package's module, is found by the entry point the page
+    declares (as every process finds it), and its own setting is a flag of its name and a record's."""
+    import tomllib
+    from importlib.metadata import EntryPoint
+
+    from depthq.configio import to_dict
+    from depthq.flags import build_config
+    from depthq.networks import get_network, registry
+    from depthq.train.config import TrainConfig
+
+    page = (DOCS / "extending.md").read_text()
+    module = next(b for b in re.findall(r"```python\n(.*?)```", page, flags=re.S) if "register_network" in b)
+    declared = tomllib.loads(next(iter(re.findall(r"```toml\n(.*?)```", page, flags=re.S))))
+    points = declared["project"]["entry-points"][registry.ENTRY_POINTS]
+    (tmp_path / "mypackage").mkdir()
+    (tmp_path / "mypackage" / "__init__.py").write_text("")
+    (tmp_path / "mypackage" / "clearance.py").write_text(module)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setattr(registry, "_NETWORKS", dict(registry._NETWORKS))  # unregistered after the test
+    monkeypatch.setattr(registry, "_installed", False)
+    installed = [EntryPoint(name, value, registry.ENTRY_POINTS) for name, value in points.items()]
+    monkeypatch.setattr(registry, "entry_points",
+                        lambda group: installed if group == registry.ENTRY_POINTS else [])
+
+    network = get_network("clearance")
+    assert type(network).__module__ == "mypackage.clearance" and network.title == "Clearance-Net"
+    config = build_config(TrainConfig, {"model": "clearance", "data": "d", "clearance.reach": 1.5})
+    assert to_dict(config)["clearance"] == {"reach": 1.5} and config.head().kind == "clearance"
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "--clearance.reach REACH" in capsys.readouterr().out
+    assert main(["train", "--model", "clearance", "--data", "d", "--out", str(tmp_path / "o"),
+                 "--clearance.reach", "0"]) == 2
+    assert "clearance.reach must be > 0 m, got 0.0" in capsys.readouterr().err

@@ -23,13 +23,15 @@ def test_the_oracle_gap_runs_a_candidate_measures_agreement_and_tabulates(
     out = tmp_path / "gap"
     shutil.copytree(smoke, out)
     setup = oracle_gap.Setup(preset="smoke", canyons=None, runs=6, sizes=(6,), seeds=(0,))
-    candidates = (oracle_gap.Candidate("default"), oracle_gap.Candidate("bootstrap", ("bootstrap=0.5",)))
+    candidates = (oracle_gap.Candidate("default"),
+                  oracle_gap.Candidate("bootstrap", ("depth.bootstrap=0.5",)))
     assert oracle_gap.run(out, setup, candidates) == 0
     names = [oracle_gap.model_names(setup, c, 6)[0] for c in candidates]
     assert names == ["depth_n6_s0", "depth_n6_s0_bootstrap0.5"]
     measured = json.loads((out / "agreement.json").read_text())
     assert set(measured) == set(names) and all(0 <= m["agreement"] <= 1 for m in measured.values())
-    assert json.loads((out / "models" / names[1] / "config.json").read_text())["train"]["bootstrap"] == 0.5
+    recorded = json.loads((out / "models" / names[1] / "config.json").read_text())["train"]
+    assert recorded["depth"]["bootstrap"] == 0.5
     rows = oracle_gap.table(out, setup, candidates).splitlines()
     assert len(rows) == 4 and rows[3].startswith("| bootstrap | 6 | 1 | ")
     assert oracle_gap.main(["table", str(out), "--only", "no such candidate"]) == 2

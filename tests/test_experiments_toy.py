@@ -260,11 +260,11 @@ def test_hard_canyons_measures_a_candidate_and_draws_the_chosen_one(tmp_path: Pa
 @pytest.fixture(scope="module")
 def looked_ahead(smoke: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A copy of the smoke run with a Depth-Q-Net looking 3 steps ahead beside its own (`depthq sweep
-    --preset smoke --nets depth --sizes 6 --seeds 0 --set lookahead=3`)."""
+    --preset smoke --nets depth --sizes 6 --seeds 0 --set depth.lookahead=3`)."""
     out = tmp_path_factory.mktemp("lookahead") / "sweep"
     shutil.copytree(smoke, out)
     sweep = widened(get_preset("smoke"), name="smoke sweep", subsets=(6,), seeds=(0,), nets=("depth",),
-                    grid=(parse_setting("lookahead=3"),))
+                    grid=(parse_setting("depth.lookahead=3"),))
     run_sweep(sweep, out, progress=False)
     return out
 

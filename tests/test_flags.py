@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from depthq.cli import VERBS, build_parser
+from depthq.configio import TAGGED
 from depthq.flags import build_config, config_from_args
 
 # Each verb's configs: (verb path, config class, fields it leaves to a flag of its own or has no use
@@ -36,11 +37,15 @@ def _class(spec: str) -> type:
 
 
 def _paths(cls: type, prefix: str = "") -> list[str]:
-    """Every field of `cls`, nested configs' fields by dotted path (read here, not from depthq.flags)."""
+    """Every field of `cls`, nested configs' fields by dotted path, a tagged config's under each of its
+    tag's values (read here, not from depthq.flags)."""
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
-        if dataclasses.is_dataclass(hints[f.name]):
+        if TAGGED in f.metadata:
+            classes = f.metadata[TAGGED][1]()
+            out += [path for name, inner in classes.items() for path in _paths(inner, f"{prefix}{name}.")]
+        elif dataclasses.is_dataclass(hints[f.name]):
             out += _paths(hints[f.name], f"{prefix}{f.name}.")
         else:
             out.append(prefix + f.name)
@@ -147,16 +152,18 @@ def test_train_help_lists_the_choices_of_every_choice_valued_flag(capsys: pytest
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     out = capsys.readouterr().out
-    for flag, choices in (("--trunk", tuple(TRUNKS)), ("--depth-loss", DEPTH_LOSSES),
-                          ("--head-form", (*HEAD_FORMS, "none")), ("--labels", ("lidar", "camera")),
+    for flag, choices in (("--trunk", tuple(TRUNKS)), ("--depth.depth-loss", DEPTH_LOSSES),
+                          ("--depth.head-form", (*HEAD_FORMS, "none")), ("--labels", ("lidar", "camera")),
                           ("--weights", (*WEIGHTS, "none")), ("--precision", PRECISIONS)):
         assert f"{flag} {{{','.join(choices)}}}" in out, flag
-    for flag, field in (("--trunk", "trunk"), ("--depth-loss", "depth_loss"), ("--precision", "precision")):
+    for flag, path in (("--trunk", "train.trunk"), ("--depth.depth-loss", "depth.depth_loss"),
+                       ("--precision", "train.precision")):
         with pytest.raises(SystemExit) as exit_:
             main(["train", "--model", "depth", "--data", "d", "--out", "o", flag, "nonesuch"])
         assert exit_.value.code == 2 and "got 'nonesuch'" in capsys.readouterr().err
-        with pytest.raises(ConfigError, match=rf"train\.{field} must be one of .*, got 'nonesuch'"):
-            TrainConfig(model="depth", data="d", **{field: "nonesuch"})
+        with pytest.raises(ConfigError, match=rf"{path} must be one of .*, got 'nonesuch'"):
+            build_config(TrainConfig, {"model": "depth", "data": "d",
+                                       path.removeprefix("train."): "nonesuch"})
 
 
 def _train(argv: list[str]):
@@ -248,14 +255,14 @@ def test_sweep_settings_parse_as_the_train_flags_do(
     assert model.name == "depth_n3_s0"  # the preset's own model: lr none is the default
     assert sweep.train_config(model, "d") == config_from_args(
         TrainConfig, args, **{**dict(sweep.train), "runs": 3, "seed": 0})
-    for setting, named in (("trunk=nonesuch", "'nonesuch'"), ("depth_loss=original,l2", "'l2'"),
-                           ("lr=fast", "'fast'"), ("head_form=concat,none,wide", "'wide'")):
+    for setting, named in (("trunk=nonesuch", "'nonesuch'"), ("depth.depth_loss=original,l2", "'l2'"),
+                           ("lr=fast", "'fast'"), ("depth.head_form=concat,none,wide", "'wide'")):
         assert main(["sweep", "--preset", "smoke", "--set", setting, "--out", str(tmp_path / "s")]) == 2
         err = capsys.readouterr().err
         assert f"--set {setting.partition('=')[0]}" in err and named in err, err
     assert not (tmp_path / "s").exists()
 
-    sweep = widened(get_preset("smoke"), grid=(parse_setting("depth_loss=original,relative"),))
+    sweep = widened(get_preset("smoke"), grid=(parse_setting("depth.depth_loss=original,relative"),))
     names = [m.name for m in sweep.models()]
     assert sorted({n for n in names if n.startswith("coll")}) == ["coll_n3_s0", "coll_n6_s0"]
     assert sorted({n for n in names if n.startswith("depth")}) == [
@@ -323,6 +330,7 @@ def test_no_setting_is_declared_twice() -> None:
     from depthq.data.recorder import CollectConfig
     from depthq.data.samples import SampleConfig
     from depthq.evaluate.online import EvalConfig
+    from depthq.networks import DepthSettings
     from depthq.pipeline.sweep import Sweep
     from depthq.train.config import TrainConfig
 
@@ -333,15 +341,17 @@ def test_no_setting_is_declared_twice() -> None:
     assert not names(Sweep) & (names(CollectConfig) | names(TrainConfig) | names(EvalConfig) - {"canyons"})
 
     in_train = {"kind": "model", "form": "head_form"}  # HeadConfig's names that TrainConfig spells otherwise
+    own = names(TrainConfig) | names(DepthSettings)  # a network's head settings may be its own
     shared = {f.name: in_train.get(f.name, f.name) for f in dataclasses.fields(HeadConfig)
-              if in_train.get(f.name, f.name) in names(TrainConfig)}
+              if in_train.get(f.name, f.name) in own}
     assert {"hidden", "dropout", "action_scale", "lookahead", "feature_projection", "form"} <= set(shared)
     defaulted = [f.name for f in dataclasses.fields(HeadConfig) if f.name in shared
                  and (f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING)]
     assert not defaulted, f"HeadConfig declares a default for TrainConfig's {defaulted}"
-    train = TrainConfig(model="depth", data="-", hidden=8, dropout=0.25, action_scale=3.0, lookahead=2,
-                        feature_projection=5)
-    assert all(getattr(train.head(), name) == getattr(train, of) for name, of in shared.items())
+    train = TrainConfig(model="depth", data="-", hidden=8, dropout=0.25, action_scale=3.0,
+                        feature_projection=5, settings=DepthSettings(lookahead=2))
+    owner = {of: train.settings if of in names(DepthSettings) else train for of in shared.values()}
+    assert all(getattr(train.head(), name) == getattr(owner[of], of) for name, of in shared.items())
 
 
 def test_verbs_are_found_here(tmp_path: Path) -> None:

@@ -30,10 +30,11 @@ from depthq.control.action_selection import (
 )
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target, collision_target
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError
-from depthq.flags import config_from_args
-from depthq.networks import build_head, get_network
+from depthq.flags import build_config, config_from_args
+from depthq.networks import DepthSettings, build_head, get_network
 from depthq.train.config import TrainConfig
 
 DEPTH = get_network("depth")
@@ -50,8 +51,8 @@ def _stored(dataset: Dataset, split: str, index: int) -> tuple[np.ndarray, np.nd
 @pytest.mark.parametrize("changes", [{}, {"every_run_end": False}, {"action_lag": 1}])
 def test_targets_over_the_lookahead_are_the_stored_bins_shifted(small_dataset: Path, changes: dict) -> None:
     dataset, config, k = Dataset.open(small_dataset), replace(CONFIG, **changes), 3
-    one = view_arrays(dataset, "train", None, "bins", config)
-    ahead = view_arrays(dataset, "train", None, "bins", config, lookahead=k)
+    one = view_arrays(dataset, "train", None, bins_target, config)
+    ahead = view_arrays(dataset, "train", None, bins_target, config, lookahead=k)
     # The same samples as the one-step view, whose targets and actions are step 1's.
     for key in ("run_index", "run_offsets", "run_id", "frame_id"):
         np.testing.assert_array_equal(ahead[key], one[key])
@@ -85,10 +86,10 @@ def test_targets_over_the_lookahead_are_the_stored_bins_shifted(small_dataset: P
 def test_a_view_refuses_a_bad_lookahead_by_value(small_dataset: Path) -> None:
     dataset = Dataset.open(small_dataset)
     with pytest.raises(ConfigError, match="lookahead must be an integer >= 1, got 0"):
-        view_arrays(dataset, "train", None, "bins", CONFIG, lookahead=0)
+        view_arrays(dataset, "train", None, bins_target, CONFIG, lookahead=0)
     with pytest.raises(ConfigError, match="its lookahead must be 1, got 3"):
-        view_arrays(dataset, "train", None, "collision", CONFIG, lookahead=3)
-    arrays = view_arrays(dataset, "val", None, "bins", CONFIG, lookahead=2)
+        view_arrays(dataset, "train", None, collision_target, CONFIG, lookahead=3)
+    arrays = view_arrays(dataset, "val", None, bins_target, CONFIG, lookahead=2)
     image, actions, targets = FrameView(dataset, "val", arrays)[0]
     assert image.dtype == np.uint8 and actions.shape == (2,) and targets.shape == (2, 26)
 
@@ -208,17 +209,17 @@ def test_selection_over_sequences_min_or_discounted_first_action() -> None:
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
-        ({"lookahead": 0}, "train.lookahead must be an integer >= 1, got 0"),
-        ({"lookahead": 2.5}, "train.lookahead must be an integer >= 1, got 2.5"),
-        ({"model": "coll", "lookahead": 3}, "its lookahead must be 1, got 3"),
-        ({"lookahead": 15}, r"train.lookahead 15 is more steps .* = 14\)"),
-        ({"lookahead_discount": 0}, r"train.lookahead_discount must be in \(0, 1\], got 0"),
-        ({"lookahead_discount": 1.2}, r"train.lookahead_discount must be in \(0, 1\], got 1.2"),
+        ({"depth.lookahead": 0}, "depth.lookahead must be an integer >= 1, got 0"),
+        ({"depth.lookahead": 2.5}, "depth.lookahead must be an integer >= 1, got 2.5"),
+        ({"model": "coll", "depth.lookahead": 3}, "depth.lookahead: a setting of model 'depth', not of"),
+        ({"depth.lookahead": 15}, r"depth.lookahead 15 is more steps .* = 14\)"),
+        ({"depth.lookahead_discount": 0}, r"depth.lookahead_discount must be in \(0, 1\], got 0"),
+        ({"depth.lookahead_discount": 1.2}, r"depth.lookahead_discount must be in \(0, 1\], got 1.2"),
     ],
 )
 def test_bad_lookahead_settings_are_refused_by_value(changes: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
-        TrainConfig(**{"model": "depth", "data": "data", **changes})
+        build_config(TrainConfig, {"model": "depth", "data": "data", **changes})
 
 
 def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
@@ -228,19 +229,22 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    args = parser.parse_args(["--model", "depth", "--data", "d", "--out", "o", "--lookahead", "3",
-                              "--lookahead-discount", "0.9"])
+    args = parser.parse_args(["--model", "depth", "--data", "d", "--out", "o", "--depth.lookahead", "3",
+                              "--depth.lookahead-discount", "0.9"])
     config = config_from_args(TrainConfig, args)
-    assert (config.lookahead, config.step_weights()) == (3, (1.0, 0.9, 0.9**2))
+    assert (config.settings.lookahead, config.settings.step_weights()) == (3, (1.0, 0.9, 0.9**2))
+    old = parser.parse_args(["--model", "depth", "--data", "d", "--out", "o", "--lookahead", "3"])
+    assert config_from_args(TrainConfig, old).settings.lookahead == 3  # the flag by its old name
 
-    assert parse_setting("lookahead=1,3,5") == ("lookahead", (1, 3, 5))
-    sweep = replace(get_preset("smoke"), grid=(parse_setting("lookahead=1,3,5"),))
+    assert parse_setting("depth.lookahead=1,3,5") == ("depth.lookahead", (1, 3, 5))
+    assert parse_setting("lookahead=1,3,5") == ("depth.lookahead", (1, 3, 5))  # its old name
+    sweep = replace(get_preset("smoke"), grid=(parse_setting("depth.lookahead=1,3,5"),))
     names = [m.name for m in sweep.models()]
     assert "depth_n3_s0" in names and "depth_n3_s0_lookahead3" in names and "depth_n6_s0_lookahead5" in names
     # Coll-Q-Net has no lookahead: each variant's row shows the one Coll-Q-Net, trained once.
     assert sorted(n for n in set(names) if n.startswith("coll")) == ["coll_n3_s0", "coll_n6_s0"]
     colls = [m for m in sweep.models() if m.net == "coll"]
-    assert {sweep.train_config(m, "d").lookahead for m in colls} == {1} and len(colls) == 6
+    assert {sweep.train_config(m, "d").head().lookahead for m in colls} == {1} and len(colls) == 6
 
 
 @pytest.mark.slow
@@ -252,10 +256,10 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     from depthq.train.trainer import train
 
     fast = {"epochs": 2, "train_batches": 4, "val_batches": 1, "batch_size": 16}
-    out = train(TrainConfig(model="depth", data=str(small_dataset), lookahead=3, **fast), tmp_path / "k3",
-                progress=False)
+    out = train(TrainConfig(model="depth", data=str(small_dataset), settings=DepthSettings(lookahead=3),
+                            **fast), tmp_path / "k3", progress=False)
     record = json.loads((out / "config.json").read_text())
-    assert record["train"]["lookahead"] == record["head"]["lookahead"] == 3
+    assert record["train"]["depth"]["lookahead"] == record["head"]["lookahead"] == 3
     net, _ = load_qnet(out)
     assert net.head.config.lookahead == 3
     policy = QNetPolicy.from_checkpoint(out)
@@ -276,13 +280,14 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     offline = result["offline"]  # the first step's loss, and every step's
     assert offline["value"] == offline["steps"][0] and len(offline["steps"]) == 3
 
-    # A checkpoint written before the field existed is a one-step net: it loads and resumes as one.
+    # A checkpoint written before the field existed (and before Depth-Q-Net's settings had a block of
+    # their own) is a one-step net: it loads and resumes as one.
     one = train(TrainConfig(model="depth", data=str(small_dataset), **{**fast, "epochs": 1}), tmp_path / "k1",
                 progress=False)
     record = json.loads((one / "config.json").read_text())
-    for block in ("train", "head"):
-        del record[block]["lookahead"]
-    del record["train"]["lookahead_discount"]
+    own = record["train"].pop("depth")
+    record["train"].update({k: v for k, v in own.items() if k not in ("lookahead", "lookahead_discount")})
+    del record["head"]["lookahead"]
     (one / "config.json").write_text(json.dumps(unchecked(record)))
     assert load_qnet(one)[0].head.config.lookahead == 1
     train(TrainConfig(model="depth", data=str(small_dataset), **fast), one, progress=False)  # epoch 2

@@ -21,7 +21,7 @@ from depthq.blocks.checkpoint import (
 )
 from depthq.blocks.heads import HeadConfig
 from depthq.configio import from_dict
-from depthq.networks import build_head
+from depthq.networks import DepthSettings, build_head
 from depthq.train.config import TrainConfig
 
 STORED = Path(__file__).parent / "data"
@@ -31,7 +31,7 @@ LEGACY_POLICY = PolicyRecord(decision_hz=4.0, frame_size=(308, 410), actions=(-1
                              rule="farthest_nearest_bin", bins=None)
 # The training every stored old record describes, as TrainConfig reads it today.
 OLD_TRAIN = dict(model="depth", data=OLD_DATA, runs=200, seed=1, trunk="efficientnet_lite0", dropout=0.5,
-                 depth_loss="valid_mean", head_form="concat", average=0.0)
+                 settings=DepthSettings(depth_loss="valid_mean", head_form="concat"), average=0.0)
 
 
 def _read(name: str, tmp_path: Path) -> dict:
@@ -76,10 +76,21 @@ def test_a_version_3_checkpoint_written_before_33_reads_as_today(tmp_path: Path)
     train = from_dict(TrainConfig, record["train"])
     assert train == TrainConfig(**OLD_TRAIN, action_scale=10.0, weights="final", snapshots=(20,))
     assert "select" not in record["train"] and "horizon" not in record["train"]
+    assert "depth_loss" not in record["train"] and record["train"]["depth"]["depth_loss"] == "valid_mean"
     assert _head(record).form == "concat"
     assert policy_record(record).rule == "farthest_nearest_bin" and "selection" not in record["policy"]
     world = dataset_record(record).env["world"]
     assert world["look"] == "flat" and "appearance" not in world
+
+
+def test_a_version_3_checkpoint_written_before_56_reads_as_today(tmp_path: Path) -> None:
+    """Before #56 every train record held Depth-Q-Net's own settings among the others: a Coll-Q-Net's,
+    which meant nothing to it, are dropped (a Depth-Q-Net's move under "depth": v3_before_33's)."""
+    record, today = _read("v3_before_56", tmp_path), _read("v3", tmp_path)
+    assert {"lookahead", "head_form", "depth_loss"} <= set(json.loads(
+        (STORED / "checkpoints" / "v3_before_56.json").read_text())["train"])
+    assert record["train"] == {k: v for k, v in today["train"].items() if k != "coll"}
+    assert from_dict(TrainConfig, record["train"]) == from_dict(TrainConfig, today["train"])
 
 
 def test_a_version_3_checkpoint_written_today_reads_as_it_is(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ import torch
 
 from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
 from depthq.train.config import TrainConfig
@@ -34,7 +35,7 @@ def test_mirrored_samples_are_the_flipped_frames_with_the_turn_and_bins_reversed
     np.testing.assert_allclose(mirrored.features[row].astype(np.float32), flipped, rtol=2e-3, atol=2e-3)
     assert not np.array_equal(mirrored.features[row], table.features[row])
 
-    arrays = view_arrays(dataset, "train", None, "bins")
+    arrays = view_arrays(dataset, "train", None, bins_target)
     samples = FeatureSamples(arrays, table, "train", mirrored=mirrored)
     rng = np.random.default_rng(0)
     idx = samples.draw(400, rng)

@@ -1,11 +1,13 @@
-"""A network is one registered class (`depthq.networks`): a toy third one, defined here in a few lines,
-trains, drives, is measured offline, drawn and exported without any other module knowing of it."""
+"""A network is one registered class (`depthq.networks`): a toy third one, defined here in a few lines
+with a setting of its own, trains, drives, is measured offline, drawn and exported without any other
+module knowing of it."""
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
 import json
+from dataclasses import dataclass
 from importlib.metadata import EntryPoint
 from pathlib import Path
 
@@ -14,13 +16,16 @@ import pytest
 
 from depthq.blocks.heads import CollHead
 from depthq.blocks.losses import DEPTH_CLIP
+from depthq.configio import from_dict, to_dict
 from depthq.control.action_selection import ACTIONS
 from depthq.control.heuristic import DepthHeuristic
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4
 from depthq.evaluate.online import drive, parse_canyon_set
 from depthq.evaluate.video import write_video
+from depthq.flags import build_config, config_from_args
 from depthq.networks import Network, ValuePlot, get_network, network_names, register_network, registry
 from depthq.policies.registry import make_policy
 from depthq.scripts.train import add_arguments
@@ -30,12 +35,24 @@ from depthq.train.offline_metric import offline_metric
 from depthq.train.trainer import train
 
 
-class Clearance(Network):
+@dataclass(frozen=True)
+class ClearanceSettings:
+    """Clearance-Net's own settings (`--clearance.reach`)."""
+
+    reach: float = 2.0  # clearances beyond this many metres are learnt as this
+
+    def __post_init__(self) -> None:
+        if not self.reach > 0:
+            raise ConfigError(f"clearance.reach must be > 0 m, got {self.reach!r}")
+
+
+class Clearance(Network[ClearanceSettings]):
     """A toy network: the clearance one step later (the nearest depth bin at t+1, from the data's bins
-    view), one number per action, mean squared error, the highest wins."""
+    target) up to its reach, one number per action, mean squared error, the highest wins."""
 
     name, title, label, colour, lr = "clearance", "Clearance-Net", "CLR", "tab:green", 0.1
-    view, metric, metric_title, loss_title = "bins", "mse", "mse", "squared error (m²)"
+    Settings, target = ClearanceSettings, bins_target
+    metric, metric_title, loss_title = "mse", "mse", "squared error (m²)"
     rule, rule_text = "highest_clearance", "the action whose predicted clearance is highest"
     maximise, tie_tol, decisive, onnx_output = True, 1e-5, 0.01, "clearance"
     plot = ValuePlot("bars", "clearance at t+1 (m)", (0.0, 2.2))
@@ -46,9 +63,10 @@ class Clearance(Network):
     def samples(self, dataset, split, n_runs, config, labels=None):
         arrays = super().samples(dataset, split, n_runs, config, labels)
         bins = arrays["target"]  # (S, 26), NaN where no reading
-        return {**arrays, "target": np.where(np.isfinite(bins), bins, DEPTH_CLIP).min(axis=1)}
+        nearest = np.where(np.isfinite(bins), bins, DEPTH_CLIP).min(axis=1)
+        return {**arrays, "target": np.minimum(nearest, config.settings.reach)}
 
-    def loss_function(self, config):
+    def loss_function(self, settings):
         def mse(pred, target):
             per_sample = (pred - target) ** 2
             return per_sample.mean(), per_sample
@@ -71,6 +89,36 @@ def test_the_builtin_networks_are_registered_in_the_papers_order() -> None:
         get_network("value")
     with pytest.raises(ConfigError, match=r"train\.model must be one of"):
         TrainConfig(model="value", data="data")
+
+
+def test_a_third_networks_own_setting_is_its_flag_record_and_sweep_setting(clearance: Network) -> None:
+    """Its setting is `--clearance.reach`, stored under its name, checked by its own class, refused for
+    another network (and another's for it); swept, it names the third network's models alone."""
+    from depthq.pipeline.presets import get_preset
+    from depthq.pipeline.sweep import parse_setting, widened
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert "--clearance.reach REACH" in parser.format_help()
+    args = parser.parse_args(["--model", "clearance", "--data", "d", "--out", "o",
+                              "--clearance.reach", "1.5"])
+    config = config_from_args(TrainConfig, args)
+    assert config.settings == ClearanceSettings(reach=1.5) and to_dict(config)["clearance"] == {"reach": 1.5}
+    assert from_dict(TrainConfig, to_dict(config)) == config
+    assert TrainConfig(model="clearance", data="d").settings == ClearanceSettings()
+    with pytest.raises(ConfigError, match=r"clearance\.reach must be > 0 m, got 0\.0"):
+        build_config(TrainConfig, {"model": "clearance", "data": "d", "clearance.reach": 0.0})
+    for model, path in (("depth", "clearance.reach"), ("clearance", "depth.lookahead")):
+        with pytest.raises(ConfigError, match=rf"{path}: a setting of model '{path.partition('.')[0]}'"):
+            build_config(TrainConfig, {"model": model, "data": "d", path: 1})
+
+    smoke = get_preset("smoke")
+    sweep = widened(smoke, nets=("depth", "coll", "clearance"), grid=(parse_setting("clearance.reach=1,2"),))
+    names = sorted({m.name for m in sweep.models()})
+    assert names == sorted({m.name for m in smoke.models()} | {f"clearance_n{n}_s0{reach}" for n in (3, 6)
+                                                               for reach in ("", "_reach1.0")})
+    reaches = {sweep.train_config(m, "d").settings.reach for m in sweep.models() if m.net == "clearance"}
+    assert reaches == {1.0, 2.0}
 
 
 def test_a_packages_network_is_found_by_its_entry_point(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -237,14 +237,14 @@ def test_probe_runs_every_part_end_to_end(tmp_path, capsys):
 
 
 def test_fig5_draws_a_sweep_whose_only_variant_is_not_the_preset(tmp_path):
-    """`--set lookahead=3` alone: its models' folders carry the setting, and Fig. 5 reads them
+    """`--set depth.lookahead=3` alone: its models' folders carry the setting, and Fig. 5 reads them
     (it once looked for the preset's folder names and drew empty axes)."""
     from dataclasses import replace
 
     from depthq.pipeline.sweep import parse_setting
     from depthq.report.figures import plot_fig5
 
-    sweep = replace(get_preset("smoke"), nets=("depth",), grid=(parse_setting("lookahead=3"),))
+    sweep = replace(get_preset("smoke"), nets=("depth",), grid=(parse_setting("depth.lookahead=3"),))
     plot_fig5(tmp_path, sweep, tmp_path / "empty.png")
     for model in sweep.models():
         assert model.name.endswith("_lookahead3")

@@ -24,6 +24,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env, run_seeds
 from depthq.data.rerender import STRIDE, dataset_env, render_frames, verify_rendered
 from depthq.data.runfile import encode_jpeg, write_run
+from depthq.data.samples import bins_target
 from depthq.data.stats import dataset_stats, format_stats
 from depthq.data.subsets import select_runs, usable_runs
 from depthq.data.views import view_arrays
@@ -225,7 +226,7 @@ def test_training_views_take_n_collected_runs_and_their_looks(rendered: Path) ->
     assert all(e.rendered is None for e in usable_runs(dataset, "train", 20))  # Table II's: collected runs
     chosen = select_runs(dataset, "train", 1, 20)
     assert [e.index for e in chosen] == [first.index, STRIDE + first.index, 2 * STRIDE + first.index]
-    arrays = view_arrays(dataset, "val", None, "bins")
+    arrays = view_arrays(dataset, "val", None, bins_target)
     val = [e.index for e in dataset.entries("val") if e.rendered is None]
     assert sorted(set(arrays["run_id"].tolist())) == sorted(v * STRIDE + i for v in range(3) for i in val)
     counts = np.diff(arrays["run_offsets"])
@@ -295,7 +296,7 @@ def test_every_look_of_a_run_is_labelled_from_its_own_frames(rendered: Path, sma
     assert all(run.camera is not None for run in looks)
     assert looks[0].camera.bins.tobytes() != looks[2].camera.bins.tobytes()  # each look's own frames
     assert verify_rendered(dataset) == []  # labels are not among what a re-render copies
-    arrays = view_arrays(dataset, "train", 1, "bins", labels="camera")
+    arrays = view_arrays(dataset, "train", 1, bins_target, labels="camera")
     assert set(arrays["run_id"].tolist()) == {v * STRIDE + source.index for v in range(len(LOOKS) + 1)}
 
 

@@ -19,7 +19,7 @@ from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, exploration_env
-from depthq.data.samples import SampleConfig
+from depthq.data.samples import SampleConfig, bins_target
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args
@@ -184,7 +184,7 @@ def test_trainable_trunk_trains_from_images(data: Path, tmp_path: Path, trunk: s
 def test_image_samples_are_the_preprocessed_frames(data: Path) -> None:
     """Frames are decoded once and held as uint8; a batch must equal preprocessing its frames."""
     dataset = Dataset.open(data)
-    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, "bins"))
+    view = FrameView(dataset, "train", view_arrays(dataset, "train", None, bins_target))
     samples = ImageSamples(view, 64)
     idx = torch.tensor([0, len(view) - 1, 7, 7])
     batch = samples.batch(idx)

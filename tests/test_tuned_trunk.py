@@ -26,9 +26,10 @@ from depthq.blocks.trunk import (
 )
 from depthq.cli import main
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError, DataError
-from depthq.networks import load_qnet
+from depthq.networks import DepthSettings, load_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import ARRAY, INDEX, cache_dir, load_activations, verify_caches
@@ -86,7 +87,7 @@ def test_mirrored_activations_are_those_of_the_flipped_frames_not_the_flipped_ma
     flipped_map = plain.reshape(1, 112, 8, 8).flip(-1).flatten(1)
     assert (flipped_map - flipped).abs().mean() > 0.2 * flipped.abs().mean()  # far from equivariant
 
-    arrays = view_arrays(dataset, "train", None, "bins")
+    arrays = view_arrays(dataset, "train", None, bins_target)
     samples = ActivationSamples(arrays, table, "train", mirrored=mirrored)
     idx = samples.draw(200, np.random.default_rng(0))
     batch, m = samples.batch(idx), idx[:, 1].bool()
@@ -189,7 +190,7 @@ def test_bad_tune_stages_are_refused_by_name(tmp_path: Path, capsys: pytest.Capt
     with pytest.raises(ConfigError, match="feature_projection 64"):
         TrainConfig(**base, tune_stages=1, feature_projection=64)
     with pytest.raises(ConfigError, match="bootstrap"):
-        TrainConfig(**base, tune_stages=1, bootstrap=0.5)
+        TrainConfig(**base, tune_stages=1, settings=DepthSettings(bootstrap=0.5))
     assert TrainConfig(**base, trunk="efficientnet_lite0_grid", tune_stages=STAGES).tune_stages == STAGES
     out = tmp_path / "out"
     args = ["train", "--model", "depth", "--data", str(tmp_path), "--tune-stages", "9", "--out", str(out)]

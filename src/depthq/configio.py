@@ -11,7 +11,7 @@ import os
 import tempfile
 import types
 import typing
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -24,6 +24,28 @@ T = TypeVar("T")
 # Field metadata of a setting added after artifacts were written without it: `to_dict` leaves it out
 # while it holds its default, so configs that do not use it keep their bytes (and old manifests match).
 OMIT_DEFAULT = {"omit_default": True}
+# Field metadata of a config whose class the value of another field chooses (a tagged union, as
+# LeRobot's `--policy.type` chooses a policy's config): `tagged(tag, classes)`. Records, flags and field
+# paths spell it by the tag's value, never by its own name: `TrainConfig.settings` of a "depth" model is
+# "depth" in config.json and `--depth.lookahead` on the command line. None as its value: the chosen
+# class's defaults (the class resolves it in its `__post_init__`).
+TAGGED = "tagged"
+
+
+def tagged(tag: str, classes: Callable[[], dict[str, type]]) -> dict[str, Any]:
+    """The metadata of a tagged config field (`TAGGED`): `tag` names the field whose value chooses its
+    class, `classes()` gives every value's class (called when needed: a registry may grow)."""
+    return {TAGGED: (tag, classes)}
+
+
+def tagged_field(cls: type) -> tuple[dataclasses.Field, str, dict[str, type]] | None:
+    """The tagged config field of dataclass `cls` (at most one), its tag field and its classes; None
+    without one."""
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if TAGGED in f.metadata:
+            tag, classes = f.metadata[TAGGED]
+            return f, tag, classes()
+    return None
 
 
 def to_dict(config: Any) -> dict[str, Any]:
@@ -39,7 +61,8 @@ def _as_dict(value: Any) -> Any:
             item = getattr(value, f.name)
             if f.metadata.get("omit_default") and item == _default(f):
                 continue
-            out[f.name] = _as_dict(item)
+            key = getattr(value, f.metadata[TAGGED][0]) if TAGGED in f.metadata else f.name
+            out[key] = _as_dict(item)
         return out
     if isinstance(value, tuple | list):
         return [_as_dict(v) for v in value]
@@ -66,15 +89,26 @@ def _default(f: dataclasses.Field) -> Any:
 
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
-    """Build `cls` from a dict, recursing into nested dataclasses; unknown keys are an error."""
+    """Build `cls` from a dict, recursing into nested dataclasses (a tagged one under its tag's value,
+    `TAGGED`); unknown keys are an error."""
     if not isinstance(data, dict):
         raise ConfigError(f"{cls.__name__}: expected a JSON object, got {data!r}")
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    kwargs = {}
+    found = tagged_field(cls)
+    if found is not None:
+        f, tag, classes = found
+        names.discard(f.name)
+        chosen = data.get(tag, _default(next(g for g in dataclasses.fields(cls) if g.name == tag)))
+        if isinstance(chosen, str) and chosen in data:
+            if chosen not in classes:
+                raise ConfigError(f"{cls.__name__}: {tag} {chosen!r} has no settings of its own")
+            kwargs[f.name] = from_dict(classes[chosen], data[chosen])
+            data = {k: v for k, v in data.items() if k != chosen}
     unknown = sorted(set(data) - names)
     if unknown:
         raise ConfigError(f"{cls.__name__}: unknown field(s) {unknown}")
-    kwargs = {}
     for key, value in data.items():
         kwargs[key] = _convert(hints[key], value)
     return cls(**kwargs)

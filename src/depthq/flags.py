@@ -4,10 +4,12 @@ Each field of a simple type (str, int, float, bool, `X | None`, `tuple[X, ...]`,
 becomes `--field-name` (`--field_name` is accepted too); a field that is itself a config dataclass
 becomes one flag per field of its own, dotted, recursively (the way tyro spells them):
 `TrainConfig.samples.horizon` is `--samples.horizon`, `CollectConfig.env.world.decision_hz` is
-`--env.world.decision-hz`. Type, default and help come from the classes: the help from the comment
-above or beside the field, else from a docstring sentence that starts with the field's name in
-backticks; a nested field's default is its enclosing config's (CollectConfig's env is
-`exploration_env()`, not a bare `EnvConfig()`). A field added to a class is a flag with no edit here.
+`--env.world.decision-hz`; a tagged config (`depthq.configio.TAGGED`) is spelled by its tag's value,
+one group per value: `TrainConfig.settings` of Depth-Q-Net is `--depth.lookahead`. Type, default and
+help come from the classes: the help from the comment above or beside the field, else from a
+docstring sentence that starts with the field's name in backticks; a nested field's default is its
+enclosing config's (CollectConfig's env is `exploration_env()`, not a bare `EnvConfig()`). A field
+added to a class is a flag with no edit here.
 
 A flag not given is not set: `config_from_args` builds the config from the flags given and leaves
 every other field at its default (or at the `base` config a verb passes), so what --help shows as a
@@ -30,7 +32,7 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
-from depthq.configio import choices
+from depthq.configio import TAGGED, choices, tagged_field
 from depthq.errors import ConfigError
 
 T = TypeVar("T")
@@ -70,9 +72,10 @@ def flag_name(path: str) -> str:
 
 
 def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]:
-    """The flags of `cls`, nested configs' fields recursively. `default`: an instance whose values are
-    the defaults (None: the fields' own). A type no flag can spell is an error here, when the parser
-    is built, rather than a field silently left out."""
+    """The flags of `cls`, nested configs' fields recursively; a tagged config's (`TAGGED`) for each of
+    its classes, or for `default`'s alone. `default`: an instance whose values are the defaults (None:
+    the fields' own). A type no flag can spell is an error here, when the parser is built, rather
+    than a field silently left out."""
     hints = typing.get_type_hints(cls)
     docs = field_help(cls)
     out = []
@@ -80,6 +83,12 @@ def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]
         if not f.init:
             continue
         value = getattr(default, f.name) if default is not None else _default(f)
+        if TAGGED in f.metadata:
+            tag, classes = f.metadata[TAGGED]
+            chosen = classes() if default is None else {getattr(default, tag): type(value)}
+            for name, inner in chosen.items():
+                out += config_flags(inner, value if default is not None else None, f"{prefix}{name}.")
+            continue
         hint = hints[f.name]
         if dataclasses.is_dataclass(hint):
             out += config_flags(hint, None if value is dataclasses.MISSING else value, f"{prefix}{f.name}.")
@@ -163,8 +172,9 @@ def config_from_args(cls: type[T], args: argparse.Namespace, base: T | None = No
 
 def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) -> T:
     """`cls` with the fields at the paths of `values` set ('samples.horizon' sets a field of the
-    nested config `samples`), every other field from `base`, else at its default; an unknown path
-    is a ConfigError naming it."""
+    nested config `samples`; 'depth.lookahead' one of the tagged config of tag value "depth"), every
+    other field from `base`, else at its default; an unknown path, or one of another tag value than
+    the config's, is a ConfigError naming it."""
     own: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {}
     for path, value in values.items():
@@ -174,6 +184,7 @@ def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) ->
         else:
             own[name] = value
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    _build_tagged(cls, own, nested, base)
     unknown = sorted((set(own) | set(nested)) - set(fields))
     if unknown:
         raise ConfigError(f"{cls.__name__} has no setting {', '.join(unknown)}")
@@ -192,10 +203,40 @@ def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) ->
     return dataclasses.replace(base, **own) if base is not None else cls(**own)  # type: ignore[type-var]
 
 
+def _build_tagged(cls: type, own: dict[str, Any], nested: dict[str, dict[str, Any]], base: Any) -> None:
+    """Into `own`: the tagged config of `cls` (`TAGGED`), from the settings `nested` holds under its tag
+    value (taken out of `nested`), on `base`'s when the tag value stays; its class's defaults (None)
+    when the tag value changes and none are given."""
+    found = tagged_field(cls)
+    if found is None:
+        return
+    f, tag, classes = found
+    if tag in own:
+        chosen = own[tag]
+    else:
+        chosen = getattr(base, tag) if base is not None else _default(next(
+            g for g in dataclasses.fields(cls) if g.name == tag))  # type: ignore[arg-type]
+    same = base is not None and getattr(base, tag) == chosen
+    for name in [n for n in nested if n in classes and n not in own]:
+        inner = nested.pop(name)
+        if name != chosen:
+            paths = ", ".join(f"{name}.{k}" for k in inner)
+            raise ConfigError(f"{cls.__name__}: {paths}: a setting of {tag} {name!r}, not of {tag} "
+                              f"{chosen!r}")
+        own[f.name] = build_config(classes[name], inner, getattr(base, f.name) if same else None)
+    if base is not None and not same and f.name not in own:
+        own[f.name] = None  # another tag value: its class's defaults
+
+
 def get_path(config: Any, path: str) -> Any:
-    """The value of a field path: get_path(train_config, 'samples.horizon')."""
+    """The value of a field path: get_path(train_config, 'samples.horizon'); a tagged config's by its
+    tag value: get_path(train_config, 'depth.lookahead')."""
     for name in path.split("."):
-        config = getattr(config, name)
+        found = tagged_field(type(config)) if dataclasses.is_dataclass(config) else None
+        if found is not None and name == getattr(config, found[1]) and not hasattr(config, name):
+            config = getattr(config, found[0].name)
+        else:
+            config = getattr(config, name)
     return config
 
 

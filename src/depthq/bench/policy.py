@@ -13,7 +13,7 @@ from depthq.blocks.heads import QNet
 from depthq.blocks.trunk import build_trunk
 from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
-from depthq.networks import build_head
+from depthq.networks import DepthQNet, build_head
 from depthq.parallel import cores
 from depthq.policies.qnet import QNetPolicy
 from depthq.policies.registry import make_policy
@@ -96,9 +96,9 @@ def bench_policy(
 def untrained_depth_policy(device: str) -> QNetPolicy:
     """A freshly initialised Depth-Q-Net as `depthq train --model depth` builds it by default: a
     policy's latency depends on the trunk and the head's shape, not on the weights."""
-    config = TrainConfig(model="depth", data="-")  # its defaults; no data: nothing is trained
+    config = TrainConfig(model=DepthQNet.name, data="-")  # its defaults; no data: nothing is trained
     net = QNet(build_trunk(config.trunk), build_head(config.head()))
-    return QNetPolicy(net, "depth", device=device)
+    return QNetPolicy(net, DepthQNet.name, device=device)
 
 
 def _batch_figures(ms: list[float]) -> dict:

@@ -14,7 +14,7 @@ from depthq.blocks.heads import QNet
 from depthq.blocks.losses import depth_l1_loss
 from depthq.blocks.optim import make_optimizer
 from depthq.blocks.trunk import STAGES, build_trunk, early_map_shape
-from depthq.networks import build_head
+from depthq.networks import DepthQNet, DepthSettings, build_head
 from depthq.parallel import cores
 from depthq.train.config import TrainConfig, check_precisions
 from depthq.train.features import FeatureTable
@@ -52,10 +52,11 @@ def bench_train(
     torch.set_flush_denormal(True)  # as `train` does
     torch.manual_seed(0)
     widths = [{} if hidden is None else {"hidden": hidden} for hidden in dict.fromkeys(hiddens)]
-    configs = [TrainConfig(model="depth", data="-", head_form=form, tune_stages=tune, **width)
+    configs = [TrainConfig(model=DepthQNet.name, data="-", settings=DepthSettings(head_form=form),
+                           tune_stages=tune, **width)
                for form in dict.fromkeys(forms) for width in widths for tune in dict.fromkeys(tunes)]
     variants = [(config, precision) for config in configs for precision in precisions]
-    names = [f"{config.head_form}/{precision}" + ("" if hiddens == (None,) else f"/{config.hidden}")
+    names = [f"{config.head().form}/{precision}" + ("" if hiddens == (None,) else f"/{config.hidden}")
              + ("" if tunes == (0,) else f"/tune{config.tune_stages}") for config, precision in variants]
     models = {name: QNet(build_trunk(config.trunk, pretrained=False, tune_stages=config.tune_stages),
                          build_head(config.head())).to(where)

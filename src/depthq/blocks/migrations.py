@@ -6,7 +6,8 @@ sweeps named model folders after them (docs/formats.md).
                     config is unchanged
     checkpoint_v2   version 2 → 3: config.json describes its policy and its dataset
     checkpoint_v3   version 3 as written before its later fields (0.1.0 is unreleased, so they came
-                    without a version): fields added, renamed and moved read as today's
+                    without a version): fields added, renamed and moved read as today's, Depth-Q-Net's
+                    own settings under its name (`own_settings`)
     sweep_setup     a sweep folder's reproduce.json written before sweeps ("preset") or before a
                     setting was part of a sweep's setup (`family`)
     RENAMED_SETTINGS, FOLDER_KEYS
@@ -36,11 +37,17 @@ _LEGACY_RULES = {"depth": "farthest_nearest_bin", "coll": "lowest_collision_prob
 _LEGACY_FRAME_SIZE = (308, 410)
 _LEGACY_DECISION_HZ = 4.0
 # TrainConfig fields added within version 3, as a record written before them reads: the one behaviour
-# there was (a one-step Depth-Q-Net, its feature unprojected, trained in float32 on LiDAR bins; the
-# paper's head, the default until "depth_first" was, and recorded only when it was not; no weight
-# average), so such a folder still loads and resumes.
-_ADDED_TRAIN = {"lookahead": 1, "lookahead_discount": 1.0, "feature_projection": 0, "precision": "fp32",
-                "head_form": "concat", "labels": "lidar", "average": 0.0}
+# there was (its feature unprojected, trained in float32 on LiDAR bins; no weight average), so such a
+# folder still loads and resumes.
+_ADDED_TRAIN = {"feature_projection": 0, "precision": "fp32", "labels": "lidar", "average": 0.0}
+# Depth-Q-Net's own settings (`depthq.networks.depth_q_net.DepthSettings`), which a train record held
+# among the others until #56 gave each network its own, under its name; the ones added within version 3
+# as a record written before them reads (a one-step Depth-Q-Net; the paper's head, the default until
+# "depth_first" was, and recorded only when it was not).
+_DEPTH = "depth"
+_DEPTH_SETTINGS = ("depth_loss", "lookahead", "lookahead_discount", "head_form", "output_bias",
+                   "bin_gradient", "bootstrap")
+_ADDED_DEPTH = {"lookahead": 1, "lookahead_discount": 1.0, "head_form": "concat"}
 # HeadConfig fields a checkpoint's "head" can lack, as such a record reads: it was written before the
 # field (action_scale, lookahead, feature_projection, form, output_bias, bin_gradient, in that order) or,
 # for `form`, at "concat", which records left out until HeadConfig's defaults moved to TrainConfig (#33).
@@ -57,11 +64,13 @@ _RENAMED = {"train": {"select": "weights"}, "policy": {"selection": "rule"}}
 _SAMPLE_SETTINGS = ("horizon", "min_frames", "every_run_end", "action_clip", "action_lag")
 
 # TrainConfig settings by their old names (old → today's path): `select` became `weights` (#33), the
-# sample settings moved into `samples`.
-RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in _SAMPLE_SETTINGS}}
+# sample settings moved into `samples`, Depth-Q-Net's own into `depth` (#56).
+RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in _SAMPLE_SETTINGS},
+                    **{name: f"{_DEPTH}.{name}" for name in _DEPTH_SETTINGS}}
 # Today's path → the name model folders keep (`depthq.pipeline.layout.model_name`), so a sweep finds
 # and reuses the folders trained before (`--set weights=final` is depth_n200_s0_selectfinal, as
-# `--set select=final` was; `--set samples.horizon=2` is coll_n200_s0_horizon2).
+# `--set select=final` was; `--set samples.horizon=2` is coll_n200_s0_horizon2; `--set
+# depth.lookahead=3` is depth_n200_s0_lookahead3).
 FOLDER_KEYS = {new: old for old, new in RENAMED_SETTINGS.items()}
 # What a sweep folder written before a setting was part of a sweep's setup holds for it.
 _SETUP_ADDED = {"family": PAPER}
@@ -121,7 +130,8 @@ def checkpoint_v3(record: dict[str, Any]) -> dict[str, Any]:
     """Version 3 as written today: fields renamed (`_RENAMED`) under their new names, the dataset's
     world before looks naming its look (`upgrade_config`), the head's and the training's fields added
     since at what they meant before (`_ADDED_HEAD`, `_ADDED_TRAIN`), the sample settings a train record
-    held itself inside `train.samples`. A record written today is returned as it is."""
+    held itself inside `train.samples`, a network's own settings under its name (`own_settings`). A
+    record written today is returned as it is."""
     out = dict(record)
     for block, names in _RENAMED.items():
         if isinstance(out.get(block), dict):
@@ -135,7 +145,22 @@ def checkpoint_v3(record: dict[str, Any]) -> dict[str, Any]:
     moved = {name: train.pop(name) for name in _SAMPLE_SETTINGS if name in train}
     if moved:
         train["samples"] = {**moved, **train.get("samples", {})}
-    return {**out, "train": train}
+    return {**out, "train": own_settings(train)}
+
+
+def own_settings(train: dict[str, Any]) -> dict[str, Any]:
+    """A train record with its network's own settings under the network's name (#56), as TrainConfig
+    stores them (`TrainConfig.settings`): one written before held Depth-Q-Net's among the others
+    (`_DEPTH_SETTINGS`, those added since at `_ADDED_DEPTH`), and so did every Coll-Q-Net's, at values
+    that meant nothing to it (dropped). A record that holds its network's block is returned as it is."""
+    model = train.get("model")
+    if not isinstance(model, str) or model in train:
+        return train
+    flat = {name: train[name] for name in _DEPTH_SETTINGS if name in train}
+    out = {k: v for k, v in train.items() if k not in _DEPTH_SETTINGS}
+    if model == _DEPTH:
+        out[_DEPTH] = {**_ADDED_DEPTH, **flat}
+    return out
 
 
 def sweep_setup(record: dict[str, Any]) -> dict[str, Any]:

@@ -23,6 +23,7 @@ wall at 0 m) would teach depths that were never measured.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,9 +33,6 @@ from depthq.errors import ConfigError
 
 HORIZON = 5
 MIN_FRAMES = 20
-# A sample's target: the next frames' depth bins ("bins", Depth-Q-Net's), or whether a collision
-# follows within `horizon` frames ("collision", Coll-Q-Net's).
-TARGETS = ("bins", "collision")
 
 
 @dataclass(frozen=True)
@@ -76,19 +74,6 @@ def check_min_frames(min_frames: object, horizon: int, what: str = "min_frames")
     if isinstance(min_frames, bool) or not isinstance(min_frames, int) or min_frames < low:
         raise ConfigError(f"{what} must be an integer >= {low} (horizon {horizon} + 2: every usable run "
                           f"keeps a depth sample), got {min_frames!r}")
-
-
-def check_lookahead(target: str, lookahead: object, what: str = "lookahead") -> None:
-    """The lookahead of samples of `target` (docs/design.md#lookahead): an integer >= 1, and 1 for a
-    collision target, which looks ahead through its target's `horizon` (else a ConfigError naming
-    `what`)."""
-    if target not in TARGETS:
-        raise ConfigError(f"a sample's target must be one of {TARGETS}, got {target!r}")
-    if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
-        raise ConfigError(f"{what} must be an integer >= 1, got {lookahead!r}")
-    if target == "collision" and lookahead != 1:
-        raise ConfigError(f"{what}: a collision target looks ahead through its target (horizon), "
-                          f"so its lookahead must be 1, got {lookahead!r}")
 
 
 def usable(meta: RunMeta, min_frames: int = MIN_FRAMES) -> bool:
@@ -143,3 +128,44 @@ def lookahead_action_indices(
     command sent after frame t + k − 1 (t + k − 1 − action_lag). Past the run's last command
     (index N − 2) it is held: only masked steps reach there, and their action still enters the head."""
     return np.minimum(t[:, None] - action_lag + np.arange(lookahead), n_frames - 2)
+
+
+@dataclass(frozen=True)
+class RunSamples:
+    """One run's samples for a target: frames t (S,), their targets (S, …), the indices of their
+    actions in the run's stored commands ((S,), or (S, K) for K steps), and the valid steps (S, K)
+    of a multi-step target (None: every sample's one step is valid)."""
+
+    frames: np.ndarray
+    targets: np.ndarray
+    commands: np.ndarray
+    mask: np.ndarray | None = None
+
+
+# What a network learns from each run (a network declares its own: `depthq.networks.Network.target`):
+# (the run's depth bins (N, bins), whether its end counts as a collision, the sample settings, the
+# steps it looks ahead) → its samples (`RunSamples`). `depthq.data.views.view_arrays` takes one.
+Target = Callable[[np.ndarray, bool, SampleConfig, int], RunSamples]
+
+
+def bins_target(bins: np.ndarray, ended: bool, config: SampleConfig, lookahead: int) -> RunSamples:
+    """The next frames' depth bins (Depth-Q-Net's): bins[t + 1] … bins[t + K], with the K commands sent;
+    a collision run's last `horizon` samples dropped, a masked step's target NaN in every bin."""
+    n, horizon, lag = len(bins), config.horizon, config.action_lag
+    if lookahead == 1:
+        t = depth_sample_indices(n, ended, horizon, lag)
+        return RunSamples(t, bins[t + 1], t - lag)
+    t, frames, mask = depth_lookahead_frames(n, ended, lookahead, horizon, lag)
+    targets = np.where(mask[:, :, None], bins[frames], np.float32(np.nan))
+    return RunSamples(t, targets, lookahead_action_indices(t, n, lookahead, lag), mask)
+
+
+def collision_target(bins: np.ndarray, ended: bool, config: SampleConfig, lookahead: int) -> RunSamples:
+    """Whether a collision follows within `horizon` frames (Coll-Q-Net's): every frame with an action.
+    It looks ahead through its horizon, so its lookahead must be 1 (else a ConfigError)."""
+    if lookahead != 1:
+        raise ConfigError(f"a collision target looks ahead through its target (horizon), so its lookahead "
+                          f"must be 1, got {lookahead!r}")
+    n, lag = len(bins), config.action_lag
+    t = coll_sample_indices(n, lag)
+    return RunSamples(t, collision_targets(n, ended, config.horizon, lag), t - lag)

@@ -1,10 +1,10 @@
 """The training views of a dataset: samples as arrays (for cached features) and as a PyTorch dataset.
 
-A view is the sample list of one split (or nested subset) for one kind of target
-(`depthq.data.samples.TARGETS`; a network picks its view: `depthq.networks`):
+A view is the sample list of one split (or nested subset) for one target (`depthq.data.samples.Target`,
+a function of a run; each network declares its own: `depthq.networks.Network.target`), e.g.:
 
-    target "bins"       (image_t, a_t, bins[t + 1])   Depth-Q-Net's; collision runs lose their last H samples
-    target "collision"  (image_t, a_t, y_t)           Coll-Q-Net's; every frame with an action
+    bins_target         (image_t, a_t, bins[t + 1])   Depth-Q-Net's; collision runs lose their last H samples
+    collision_target    (image_t, a_t, y_t)           Coll-Q-Net's; every frame with an action
 
 A bins view's bins (its targets and the frame's own `current` bins) are the LiDAR's, or with
 `labels="camera"` those a labeller estimated from the camera (`depthq.data.camera_labels`).
@@ -33,16 +33,7 @@ from depthq.data.camera_labels import LABEL_SOURCES, missing_labels_message
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
 from depthq.data.runfile import RunReader
-from depthq.data.samples import (
-    SampleConfig,
-    check_lookahead,
-    coll_sample_indices,
-    collision_targets,
-    depth_lookahead_frames,
-    depth_sample_indices,
-    ends_in_collision,
-    lookahead_action_indices,
-)
+from depthq.data.samples import SampleConfig, Target, ends_in_collision
 from depthq.data.subsets import select_runs
 from depthq.errors import ConfigError
 
@@ -51,25 +42,26 @@ def view_arrays(
     dataset: Dataset,
     split: str,
     n_runs: int | None,
-    target: str,
+    target: Target,
     config: SampleConfig | None = None,
     lookahead: int = 1,
     labels: str = "lidar",
 ) -> dict[str, np.ndarray]:
-    """All samples of a view of `target`, run by run; a bins view's bins from `labels` (the LiDAR or the
+    """All samples of a view of `target`, run by run; the bins it reads from `labels` (the LiDAR or the
     camera).
 
     Keys: `run_index` (R,) split index of each run; `run_offsets` (R + 1,) samples of run r are
     `run_offsets[r]:run_offsets[r + 1]`; per sample (S,): `run_id` (split index of its run),
     `frame_id` (t), `action` (a_t: the stored command of frame t − action_lag, clipped to
-    ±action_clip), `current`: bins[t] (S, 26), and `target`: bins[t + 1] (S, 26) for "bins", y_t
-    (S,) for "collision".
+    ±action_clip), `current`: bins[t] (S, 26), and `target`: the target's, e.g. bins[t + 1] (S, 26)
+    for `bins_target`, y_t (S,) for `collision_target`.
 
-    "bins" with `lookahead` K > 1: `action` (S, K) the commands of frames t … t + K − 1 (lag and
-    clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every bin of a masked
-    step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.samples`).
+    A target of `lookahead` K > 1 steps (`bins_target`'s): `action` (S, K) the commands of frames
+    t … t + K − 1 (lag and clip as above), `target` (S, K, 26) bins[t + 1] … bins[t + K], NaN in every
+    bin of a masked step (so no loss counts it), and `mask` (S, K) the valid steps (`depthq.data.samples`).
     """
-    check_lookahead(target, lookahead, "view lookahead")
+    if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
+        raise ConfigError(f"view lookahead must be an integer >= 1, got {lookahead!r}")
     if labels not in LABEL_SOURCES:
         raise ConfigError(f"view labels must be one of {LABEL_SOURCES}, got {labels!r}")
     config = config or SampleConfig()
@@ -79,26 +71,14 @@ def view_arrays(
     frame_ids, actions, targets, masks, current = [], [], [], [], []
     for entry in runs:
         run = dataset.read_run(entry, images=False)
-        bins = run.bins if target == "collision" else _depth_bins(dataset, run, labels)
-        ended = ends_in_collision(entry, config.every_run_end)
-        if target == "collision":
-            t = coll_sample_indices(run.n_frames, config.action_lag)
-            y = collision_targets(run.n_frames, ended, config.horizon, config.action_lag)
-            commands = run.actions[t - config.action_lag]
-        elif lookahead > 1:
-            t, frames, mask = depth_lookahead_frames(
-                run.n_frames, ended, lookahead, config.horizon, config.action_lag
-            )
-            y = np.where(mask[:, :, None], bins[frames], np.float32(np.nan))
-            commands = run.actions[lookahead_action_indices(t, run.n_frames, lookahead, config.action_lag)]
-            masks.append(mask)
-        else:
-            t = depth_sample_indices(run.n_frames, ended, config.horizon, config.action_lag)
-            y, commands = bins[t + 1], run.actions[t - config.action_lag]
-        frame_ids.append(t)
-        current.append(bins[t])
-        actions.append(np.clip(commands, -config.action_clip, config.action_clip))
-        targets.append(y)
+        bins = _depth_bins(dataset, run, labels)
+        got = target(bins, ends_in_collision(entry, config.every_run_end), config, lookahead)
+        if got.mask is not None:
+            masks.append(got.mask)
+        frame_ids.append(got.frames)
+        current.append(bins[got.frames])
+        actions.append(np.clip(run.actions[got.commands], -config.action_clip, config.action_clip))
+        targets.append(got.targets)
     counts = np.array([len(t) for t in frame_ids], dtype=np.int64)
     run_index = np.array([entry.index for entry in runs], dtype=np.int64)
     return {

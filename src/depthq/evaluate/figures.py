@@ -11,14 +11,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from depthq.networks import ValuePlot, get_network, network_names
+from depthq.networks import DepthQNet, ValuePlot, get_network, network_names
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.sensors import BinConfig
 from depthq.sim.topdown import draw_run, plot_runs
 
 ACTION_NAMES = {-1.0: "right (−1)", 0.0: "straight (0)", 1.0: "left (+1)"}
-# A policy that is no network's (the heuristic, OU): the true depth alone, drawn as a network's bins.
-DEPTH_PLOT = get_network("depth").plot
+# A policy that is no network's (the heuristic, OU): the true depth alone, drawn as Depth-Q-Net's bins.
+DEPTH_PLOT = DepthQNet.plot
 
 
 def value_plot(policy: dict[str, Any]) -> ValuePlot:

@@ -31,7 +31,7 @@ import numpy as np
 from depthq.control.action_selection import ACTIONS, Selection, pick_best
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE
-from depthq.networks import Network, get_network, network_names
+from depthq.networks import DepthQNet, Network, get_network, network_names
 from depthq.sim.canyon import FAMILIES, Canyon, CanyonId, nearest_on_polyline
 from depthq.sim.env import COLLISIONS, CanyonEnv, EnvConfig
 from depthq.sim.sensors import bump, depth_bins, finish_scan
@@ -45,7 +45,7 @@ class Oracle:
     """A perfect predictor of the network `signal` names ("depth" or "coll") `lookahead` frames ahead,
     with the rule that picks an action from it (`selection`: a depth oracle's, for K > 1)."""
 
-    signal: str = "depth"
+    signal: str = DepthQNet.name
     lookahead: int = 1
     selection: Selection = field(default_factory=Selection)
 

@@ -33,6 +33,7 @@ from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_agreement
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
+from depthq.networks import DepthQNet
 from depthq.parallel import worker_context
 from depthq.progress import Bar
 from depthq.sim.env import CanyonEnv
@@ -86,7 +87,8 @@ def small_dqn(
     data = out / "data"
     config = CollectConfig(runs=runs, val_runs=max(2, runs // 10), env=exploration_env(decision_hz))
     collect(data, config, workers=2)
-    ckpt = train(TrainConfig(model="depth", data=str(data), runs=runs, epochs=epochs), out / f"depth_n{runs}")
+    ckpt = train(TrainConfig(model=DepthQNet.name, data=str(data), runs=runs, epochs=epochs),
+                 out / f"{DepthQNet.name}_n{runs}")
     summary = evaluate(str(ckpt), out / "eval", EvalConfig(canyons=parse_canyon_set(canyons)), video=False)
     return {**summary["summary"], "offline": summary.get("offline")}
 

@@ -1,17 +1,18 @@
 """The networks: each a `Network` registered by name, owning what differs
 between networks (its training, metric, rule, export and drawing), so that every layer above asks the
 registry (`get_network`) instead of testing a network's name. Importing this package registers
-Depth-Q-Net ("depth") and Coll-Q-Net ("coll"); a user's network registers with `register_network`."""
+Depth-Q-Net ("depth") and Coll-Q-Net ("coll"); a user's network registers with `register_network` (or
+an entry point: `depthq.networks.registry`), its own settings a dataclass of its own (`Network.Settings`)."""
 
 # isort: off
 # Registered in this order, the paper's, which `network_names` (a sweep's default networks) keeps.
-from depthq.networks.depth_q_net import DepthQNet
+from depthq.networks.depth_q_net import DepthQNet, DepthSettings
 from depthq.networks.coll_q_net import CollQNet
 
 # isort: on
 from depthq.networks.build import build_head, load_qnet
-from depthq.networks.network import Network, ValuePlot
+from depthq.networks.network import Network, NoSettings, Training, ValuePlot
 from depthq.networks.registry import get_network, network_names, register_network
 
-__all__ = ["CollQNet", "DepthQNet", "Network", "ValuePlot", "build_head", "get_network", "load_qnet",
-           "network_names", "register_network"]
+__all__ = ["CollQNet", "DepthQNet", "DepthSettings", "Network", "NoSettings", "Training", "ValuePlot",
+           "build_head", "get_network", "load_qnet", "network_names", "register_network"]

@@ -3,7 +3,7 @@ collision within the target's horizon, and acts on the least likely (docs/design
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -11,12 +11,14 @@ import torch
 from depthq.blocks.heads import CollHead, Head, HeadConfig, probability
 from depthq.blocks.losses import LossFn, coll_bce_loss
 from depthq.control.action_selection import RULES, Selection
-from depthq.networks.network import Network, ValuePlot
+from depthq.data.samples import collision_target
+from depthq.errors import ConfigError
+from depthq.networks.network import Network, NoSettings, ValuePlot
 from depthq.networks.registry import register_network
 
 
 @register_network
-class CollQNet(Network):
+class CollQNet(Network[NoSettings]):
     name = "coll"
     title = "Coll-Q-Net"
     label = "CQN"
@@ -26,13 +28,8 @@ class CollQNet(Network):
     # 0.01 and 0.112 at 0.1; driven in val:1000-1019 it goes 2.24 m at 0.01 and 3.06 m at 0.1
     # (`python -m research.val_choices`). Hence 0.1, as Depth-Q-Net's (docs/deviations.md#coll-lr).
     lr = 0.1
-    view = "collision"
+    target = collision_target
     label_sources = ("lidar",)  # it learns from the bump, not from depth bins
-    # Depth-Q-Net's settings (its lookahead, head form, bootstrap, depth loss, labels' source, bins'
-    # initial bias and gradient): a sweep variant that sets them trains each Coll-Q-Net once, under its
-    # own name.
-    unused_settings = ("lookahead", "lookahead_discount", "head_form", "bootstrap", "depth_loss", "labels",
-                       "output_bias", "bin_gradient")
     metric = "cross_entropy"
     metric_title = "cross-entropy"
     loss_title = "cross-entropy"
@@ -53,7 +50,13 @@ class CollQNet(Network):
     def build_head(self, config: HeadConfig) -> Head:
         return CollHead(config)
 
-    def loss_function(self, config: Any) -> LossFn:
+    def check_targets(self, targets: np.ndarray, where: str) -> None:
+        """Collision targets with no collision teach nothing."""
+        if not targets.any():
+            raise ConfigError(f"{self.title} needs collisions, but {where} hold none (no run ended in a "
+                              "bump); train a network that learns without them, or use more runs")
+
+    def loss_function(self, settings: NoSettings) -> LossFn:
         """Binary cross-entropy on the logits."""
         return coll_bce_loss
 

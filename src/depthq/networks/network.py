@@ -3,9 +3,11 @@ everything that differs between networks, so that the trainer, the policies, eva
 report and the sweeps ask it rather than test its name.
 
 A `Network` says what it is called (`name`, as checkpoints, sweeps and folders record it; `title`;
-`label`, the report's short name; `colour`), how it trains (`lr`, its default learning rate; the data
-view its samples come from, `samples`; its head, `build_head`; its loss, `loss_function`; the head's
-own training loss is the head's: `depthq.blocks.heads.Head.training_loss`), how it is measured offline
+`label`, the report's short name; `colour`), which settings are its own (`Settings`: a frozen
+dataclass, a training's `TrainConfig.settings`, spelled `--NAME.FIELD` and stored under its name), how
+it trains (`lr`, its default learning rate; the target its samples learn, `target`, and the samples
+themselves, `samples`; its head, `head_config` and `build_head`; its loss, `loss_function`; the
+head's own training loss is the head's: `depthq.blocks.heads.Head.training_loss`), how it is measured offline
 (`metric`), how it acts (`output`: a head's raw output of one frame's candidates → its values;
 `scores`: values → one score per candidate, `maximise`: whether the highest wins; `tie_tol`; `rule`,
 by the name a checkpoint records), what an exported graph outputs (`onnx_output`), and how its values
@@ -15,7 +17,7 @@ are drawn (`plot`). Subclasses set the class attributes and override what differ
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Generic, Literal, Protocol, TypeVar
 
 import numpy as np
 import torch
@@ -25,8 +27,28 @@ from depthq.blocks.losses import LossFn
 from depthq.control.action_selection import Selection, first_actions, pick_best
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.manifest import Dataset
+from depthq.data.samples import SampleConfig, Target
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError
+
+S = TypeVar("S")  # a network's own settings (`Network.Settings`)
+
+
+@dataclass(frozen=True)
+class NoSettings:
+    """The settings of a network that has none of its own."""
+
+
+class Training(Protocol):
+    """What a network reads of a training's config: `depthq.train.config.TrainConfig` (a layer above
+    this one) has these, and its own settings in `settings` (`Network.Settings`)."""
+
+    model: str
+    trunk: str
+    tune_stages: int
+    labels: str
+    samples: SampleConfig
+    settings: Any
 
 
 @dataclass(frozen=True)
@@ -39,22 +61,23 @@ class ValuePlot:
     limits: tuple[float, float]
 
 
-class Network:
-    """One network: its names, its training, its offline metric, its rule and how it is drawn.
-
-    `config` arguments are a `depthq.train.config.TrainConfig` (a layer above this one)."""
+class Network(Generic[S]):
+    """One network: its names, its own settings, its training, its offline metric, its rule and how it
+    is drawn."""
 
     name: ClassVar[str]  # the name checkpoints (head.kind, train.model), sweeps and model folders record
     title: ClassVar[str]  # e.g. "Depth-Q-Net"
     label: ClassVar[str]  # the report's short name, e.g. "DQN"
     colour: ClassVar[str]  # the report's line colour (matplotlib)
     lr: ClassVar[float]  # the learning rate `TrainConfig.lr` none means
-    view: ClassVar[str]  # the data view its samples come from (`depthq.data.samples.TARGETS`)
+    # Its own training settings, a frozen dataclass whose defaults are its defaults (`TrainConfig.settings`;
+    # a sweep's setting of another network's is not one of its settings: `--set depth.lookahead=1,3`
+    # trains each Coll-Q-Net once).
+    Settings: ClassVar[type] = NoSettings
+    target: ClassVar[Target]  # what its samples learn from a run (`depthq.data.samples.Target`)
     label_sources: ClassVar[tuple[str, ...]] = LABEL_SOURCES  # `TrainConfig.labels` it can learn from
-    looks_ahead: ClassVar[bool] = False  # whether it predicts `TrainConfig.lookahead` > 1 steps
-    bootstraps: ClassVar[bool] = False  # whether it takes a bootstrapped target (`TrainConfig.bootstrap`)
-    # TrainConfig settings it has no use for: a sweep's variant that sets them trains it once.
-    unused_settings: ClassVar[tuple[str, ...]] = ()
+    # Whether its outputs are depth bins behind a ReLU, outputs that can die (`depthq.train.dead_outputs`).
+    outputs_bins: ClassVar[bool] = False
     metric: ClassVar[str]  # the offline metric's name (its training loss on every validation sample)
     metric_title: ClassVar[str]  # that metric in Table I's column, e.g. "abs diff"
     loss_title: ClassVar[str]  # its loss in Fig. 5's title, e.g. "cross-entropy"
@@ -74,22 +97,21 @@ class Network:
         return f"<network {self.name!r}: {self.title}>"
 
     # -- training --------------------------------------------------------------------------------
-    def default_form(self, lookahead: int) -> str:
-        """The head form (`depthq.blocks.heads.HEAD_FORMS`) it gets unless told."""
-        return "concat"
+    def check_training(self, config: Training) -> None:
+        """Its rules for a training's settings where its own meet the general ones (e.g. a lookahead
+        against the runs' length); its settings' own rules are checked by `Settings` itself."""
 
-    def check_lookahead(self, lookahead: object, what: str = "lookahead") -> None:
-        """Its lookahead: an integer >= 1, and 1 unless it `looks_ahead` (else a ConfigError naming
-        `what`)."""
-        if isinstance(lookahead, bool) or not isinstance(lookahead, int) or lookahead < 1:
-            raise ConfigError(f"{what} must be an integer >= 1, got {lookahead!r}")
-        if lookahead != 1 and not self.looks_ahead:
-            raise ConfigError(f"{what} is a lookahead net's; {self.title} predicts one step, so its "
-                              f"lookahead must be 1, got {lookahead!r}")
+    def head_config(self, head: HeadConfig, settings: S) -> HeadConfig:
+        """Its head of `settings`, from a training's `head`: by default the paper's head as it is (one
+        step, "concat", the bins' settings at their neutral values)."""
+        return head
 
     def check_head(self, config: HeadConfig) -> None:
-        """Its own rules for a head (the shape's are `HeadConfig`'s): by default the paper's head."""
-        self.check_lookahead(config.lookahead, "HeadConfig.lookahead")
+        """Its own rules for a head (the shape's are `HeadConfig`'s): by default the paper's head of one
+        step."""
+        if config.lookahead != 1:
+            raise ConfigError(f"HeadConfig.lookahead: {self.title} predicts one step, so its lookahead "
+                              f"must be 1, got {config.lookahead!r}")
         if config.form != "concat":
             raise ConfigError(f"HeadConfig.form {config.form!r}: {self.title} has only 'concat'")
         if config.output_bias:
@@ -104,16 +126,27 @@ class Network:
         raise NotImplementedError
 
     def samples(
-        self, dataset: Dataset, split: str, n_runs: int | None, config: Any, labels: str | None = None
+        self, dataset: Dataset, split: str, n_runs: int | None, config: Training, labels: str | None = None
     ) -> dict[str, np.ndarray]:
         """Its samples of `split` (the first `n_runs` usable runs; None: all) as `view_arrays` gives
-        them, `target` what it learns; `labels` (None: the config's) where the bins come from."""
-        return view_arrays(dataset, split, n_runs, self.view, config.samples, config.lookahead,
+        them for its `target`; `labels` (None: the config's) where the bins come from."""
+        return view_arrays(dataset, split, n_runs, type(self).target, config.samples, 1,
                            config.labels if labels is None else labels)
 
-    def loss_function(self, config: Any) -> LossFn:
+    def check_targets(self, targets: np.ndarray, where: str) -> None:
+        """Its training samples' targets can teach it (`where`: the runs they came from, in words)."""
+
+    def loss_function(self, settings: S) -> LossFn:
         """Its training loss: (outputs, targets) → (batch loss, per-sample loss (B,))."""
         raise NotImplementedError
+
+    def step_loss(self, settings: S) -> LossFn:
+        """The loss of one predicted step (a multi-step head's offline metric measures each step by it)."""
+        return self.loss_function(settings)
+
+    def bootstrap(self, settings: S) -> float:
+        """γ > 0: it learns a bootstrapped target (`depthq.train.bootstrap`); 0: its own target alone."""
+        return 0.0
 
     # -- acting ----------------------------------------------------------------------------------
     def output(self, raw: torch.Tensor) -> torch.Tensor:

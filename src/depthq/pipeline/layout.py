@@ -17,8 +17,10 @@ from depthq.blocks.migrations import FOLDER_KEYS
 
 def model_name(net: str, runs: int, seed: int, variant: tuple[tuple[str, Any], ...] = ()) -> str:
     """e.g. depth_n200_s1, or depth_n200_s1_dropout0.5 in a sweep's variant (a tuple value's items
-    joined by '+': depth_n200_s1_snapshots40+80; a renamed setting under its old name, `FOLDER_KEYS`)."""
-    settings = "".join(f"_{FOLDER_KEYS.get(k, k)}{setting_text(v)}" for k, v in variant)
+    joined by '+': depth_n200_s1_snapshots40+80; a renamed setting under its old name, `FOLDER_KEYS`; a
+    network's own setting without its network's name: depth.lookahead is depth_n200_s1_lookahead3)."""
+    keys = [FOLDER_KEYS.get(k, k.removeprefix(f"{net}.")) for k, _ in variant]
+    settings = "".join(f"_{key}{setting_text(v)}" for key, (_, v) in zip(keys, variant, strict=True))
     return f"{net}_n{runs}_s{seed}{settings}"
 
 

@@ -23,9 +23,13 @@ Flags = list[tuple[str, str | None]]  # (flag, its value as the flag takes it; N
 
 def flags_between(config: Any, base: Any, exclude: tuple[str, ...] = ()) -> Flags:
     """The flags (`depthq.flags`' spelling) that make `base` into `config`: one per field whose values
-    differ, and one per required field (it has no default); none for the fields in `exclude`."""
+    differ, and one per required field (it has no default); none for the fields in `exclude`, nor for
+    another network's own settings than `config`'s (`TrainConfig.settings`)."""
     out: Flags = []
+    own = {flag.path for flag in config_flags(type(config), config)}
     for flag in config_flags(type(config)):
+        if flag.path not in own:
+            continue
         value = get_path(config, flag.path)
         required = flag.default is dataclasses.MISSING
         if flag.path in exclude or (not required and get_path(base, flag.path) == value):

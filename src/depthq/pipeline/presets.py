@@ -14,22 +14,24 @@ from typing import Any
 from depthq.data.recorder import CollectConfig
 from depthq.data.subsets import PAPER_SUBSETS
 from depthq.errors import ConfigError
+from depthq.networks import CollQNet, DepthQNet
 from depthq.pipeline.sweep import Sweep, retarget
 from depthq.sim.world import NOMINAL_DECISION_HZ
 
-NETS = ("depth", "coll")  # the paper's two networks, in its tables' order
-# Every TrainConfig field but a sweep's own (`NOT_IN_GRID`: model, data, runs, seed), by field path;
-# tests/test_reproduce.py checks that none is left out. None is the network's own where a field's
-# default depends on its network (`lr`, `head_form`, `average`, `weights`: `TrainConfig`).
+NETS = (DepthQNet.name, CollQNet.name)  # the paper's two networks, in its tables' order
+# Every TrainConfig field but a sweep's own (`NOT_IN_GRID`: model, data, runs, seed), by field path, and
+# every setting of NETS' own (`depth.*`: a network trains with its own alone); tests/test_reproduce.py
+# checks that none is left out. None is the network's own where a field's default depends on its
+# network (`lr`, `average`, `weights`: `TrainConfig`; `depth.head_form`: `DepthSettings`).
 TRAINING: dict[str, Any] = {
     "epochs": 40, "train_batches": 100, "val_batches": 10, "batch_size": 64, "lr": None, "rho": 0.95,
     "eps": 1e-08, "weight_decay": 4e-05, "trunk": "efficientnet_lite0_columns", "tune_stages": 0,
-    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "depth_loss": "original", "lookahead": 1,
-    "lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096, "head_form": None,
-    "output_bias": 0.0, "bin_gradient": "relu", "bootstrap": 0.0, "mirror": False, "labels": "lidar",
-    "samples.horizon": 5, "samples.min_frames": 20, "samples.every_run_end": True,
-    "samples.action_clip": 1.0, "samples.action_lag": 0, "weights": None, "snapshots": (), "average": None,
-    "precision": "fp32",
+    "dropout": 0.0, "action_scale": 10.0, "input_size": 128, "depth.depth_loss": "original",
+    "depth.lookahead": 1, "depth.lookahead_discount": 1.0, "feature_projection": 0, "hidden": 4096,
+    "depth.head_form": None, "depth.output_bias": 0.0, "depth.bin_gradient": "relu", "depth.bootstrap": 0.0,
+    "mirror": False, "labels": "lidar", "samples.horizon": 5, "samples.min_frames": 20,
+    "samples.every_run_end": True, "samples.action_clip": 1.0, "samples.action_lag": 0, "weights": None,
+    "snapshots": (), "average": None, "precision": "fp32",
 }
 
 

@@ -2,7 +2,8 @@
 
 The presets (`depthq.pipeline.presets`) are sweeps; `depthq sweep` widens one: more seeds (`--seeds
 0-9`), other sizes, one network, or a grid of training settings (`--set dropout=0,0.5`), each value
-a *variant* whose models are named after it (`depth_n200_s0_dropout0.5`). A sweep's *setup* (the
+a *variant* whose models are named after it (`depth_n200_s0_dropout0.5`); a network's own setting
+(`--set depth.lookahead=1,3`) is a variant of that network's models alone. A sweep's *setup* (the
 dataset, the evaluation canyons, the training budget) is what its folder's results depend on; the
 grid may change between runs of the same folder, so 10 seeds reuse the 3 a preset trained.
 """
@@ -21,7 +22,7 @@ from depthq.data.recorder import CollectConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, parse_canyon_set
 from depthq.flags import build_config, config_flags, get_path, parse_value
-from depthq.networks import get_network, network_names
+from depthq.networks import network_names
 from depthq.pipeline.layout import model_name, setting_text
 from depthq.sim.canyon import FAMILIES, eval_set, split_family
 from depthq.sim.world import world_for
@@ -53,11 +54,16 @@ class Model:
 
     @property
     def settings(self) -> Variant:
-        """The settings of `variant` its network has: a network's `unused_settings` (a Coll-Q-Net's
-        `lookahead`) are dropped, so `--set lookahead=1,3,5` trains each Coll-Q-Net once (and every
-        variant's row shows it)."""
-        unused = get_network(self.net).unused_settings
-        return tuple((k, v) for k, v in self.variant if k not in unused)
+        """The settings of `variant` its network has (`own_settings`): `--set depth.lookahead=1,3,5`
+        trains each Coll-Q-Net once (and every variant's row shows it)."""
+        return own_settings(self.net, self.variant)
+
+
+def own_settings(net: str, settings: Settings) -> Settings:
+    """The settings (field paths) of `settings` that network `net` has: those of another network's own
+    settings (`TrainConfig.settings`, 'depth.lookahead' of a Coll-Q-Net) left out."""
+    others = set(network_names()) - {net}
+    return tuple((k, v) for k, v in settings if k.partition(".")[0] not in others)
 
 
 @dataclass(frozen=True)
@@ -148,7 +154,8 @@ class Sweep:
 
     def train_config(self, model: Model, data: str) -> TrainConfig:
         own = {"model": model.net, "data": data, "runs": model.runs, "seed": model.seed}
-        return build_config(TrainConfig, own | dict(self.train) | dict(model.settings))
+        shared = dict(own_settings(model.net, self.train))  # what every model trains with: its network's
+        return build_config(TrainConfig, own | shared | dict(model.settings))
 
     def setup(self) -> dict[str, Any]:
         """What a folder's dataset, checkpoints and evaluations depend on (not the grid's extent), by
@@ -237,7 +244,8 @@ def parse_ints(text: str, what: str) -> tuple[int, ...]:
 def differing(net: str, variant: Variant, train: Settings = ()) -> Variant:
     """The settings of `variant` that `net` has (`Model.settings`) and whose values differ from its own
     under a sweep's `train` settings: what names its models' folders (`Model.differs`)."""
-    own = build_config(TrainConfig, {"model": net, "data": "data", "runs": 1, "seed": 0} | dict(train))
+    given = {"model": net, "data": "data", "runs": 1, "seed": 0} | dict(own_settings(net, train))
+    own = build_config(TrainConfig, given)
     settings = Model(net, 1, 0, variant).settings
     return tuple((k, v) for k, v in settings if get_path(own, k) != v)
 

@@ -17,6 +17,7 @@ from typing import Any, NamedTuple
 
 from depthq.configio import read_json
 from depthq.errors import ConfigError, guarded
+from depthq.networks import CollQNet, DepthQNet
 from depthq.pipeline.layout import model_name
 from depthq.pipeline.sweep import Settings, Variant, differing, parse_ints, parse_setting
 from depthq.report.cells import evaluation_summary, mean_interval
@@ -26,6 +27,7 @@ PROG = "python -m depthq.report.paired"
 PATTERN = "eval/{model}"  # a sweep's evaluation of a model (its folder name: {net}_n{n}_s{seed}…)
 PAIRED = (("to first collision (m)", "distance_to_collision_mean", ".2f"), ("successes", "successes", ".1f"),
           ("closest mean (m)", "closest_mean", ".2f"))
+PAIR = (CollQNet.name, DepthQNet.name)  # the paper's comparison: its baseline, then its network
 Summaries = dict[int, dict[str, Any]]  # seed → an evaluation's summary
 Results = dict[int, tuple[Summaries, Summaries]]  # size → (Coll-Q-Net's, Depth-Q-Net's) summaries
 
@@ -53,12 +55,12 @@ def paired_results(sweep: Path, sizes: tuple[int, ...], seeds: tuple[int, ...], 
     the seeds both have, each read once. `pattern` names a model's evaluation folder under `sweep`;
     `variant`: the sweep's models in it (`depthq sweep --set`'s, one value each)."""
     results: Results = {}
-    differs = {net: differing(net, variant, _sweep_train(sweep)) for net in ("coll", "depth")}
+    differs = {net: differing(net, variant, _sweep_train(sweep)) for net in PAIR}
     for n in sizes:
         for seed in seeds:
             coll, depth = (evaluation_summary(Path(sweep) / pattern.format(
                 net=net, n=n, seed=seed, model=model_name(net, n, seed, differs[net])))
-                for net in ("coll", "depth"))
+                for net in PAIR)
             if coll and depth:
                 both = results.setdefault(n, ({}, {}))
                 both[0][seed], both[1][seed] = coll, depth

@@ -119,7 +119,7 @@ def per_seed_rows(out: Path, sweep: Sweep) -> list[dict[str, str]]:
             evaluations = per_seed(results, net, n, variant)
             cells = [f"{r['summary']['successes']}/{r['summary']['distance_mean']:.1f}" for r in evaluations]
             row[f"{get_network(net).label}: successes/m per seed"] = ", ".join(cells) or "–"
-            if get_network(net).view == "bins":
+            if get_network(net).outputs_bins:
                 row[f"{get_network(net).label}: dead outputs per seed"] = _dead_cell(evaluations)
         published = paper_networks()
         cells = [f"{net.paper[n][1]}/{net.paper[n][0]}" for net in published if n in net.paper]

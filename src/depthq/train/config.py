@@ -5,14 +5,13 @@ from __future__ import annotations
 import math
 import typing
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 from depthq.blocks.checkpoint import WEIGHTS
-from depthq.blocks.heads import BIN_GRADIENTS, HEAD_FORMS, HeadConfig
-from depthq.blocks.losses import DEPTH_LOSSES
+from depthq.blocks.heads import HeadConfig
 from depthq.blocks.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
-from depthq.configio import OMIT_DEFAULT, check_choices, check_seed
+from depthq.configio import OMIT_DEFAULT, check_choices, check_seed, tagged
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
@@ -36,9 +35,6 @@ PRECISIONS: tuple[str, ...] = typing.get_args(Precision)
 # The other choice-valued settings' types, each from the tuple or registry that owns its choices: the
 # flags list them (`depthq train --help`) and `check_choices` checks them, with no list of them here.
 TrunkName = Literal[tuple(TRUNKS)]  # type: ignore[valid-type]
-DepthLoss = Literal[DEPTH_LOSSES]  # type: ignore[valid-type]
-HeadForm = Literal[HEAD_FORMS]  # type: ignore[valid-type]
-BinGradient = Literal[BIN_GRADIENTS]  # type: ignore[valid-type]
 LabelSource = Literal[LABEL_SOURCES]  # type: ignore[valid-type]
 Weights = Literal[WEIGHTS]  # type: ignore[valid-type]
 
@@ -50,6 +46,11 @@ def check_precisions(precisions: tuple[str, ...], what: str) -> None:
     for precision in precisions:
         if precision not in PRECISIONS:
             raise ConfigError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+
+
+def network_settings() -> dict[str, type]:
+    """Each registered network's own settings class (`Network.Settings`), by its name."""
+    return {name: get_network(name).Settings for name in network_names()}
 
 
 def _int_at_least(name: str, value: object, low: int) -> None:
@@ -70,11 +71,12 @@ class TrainConfig:
     (docs/design.md#training).
     `runs` takes the first n usable training runs (the paper's nested subsets); None takes all.
     `lr` None means the network's own rate (`Network.lr`); read the effective one from `learning_rate`.
-    Settings whose default depends on other fields (`head_form`, `average`, `weights`; `lr`) are
-    resolved in one place, `_resolve_defaults`.
+    Settings whose default depends on other fields (`average`, `weights`; `lr`) are resolved in one
+    place, `_resolve_defaults`. The network's own settings are `settings` (`Network.Settings`:
+    `--depth.lookahead`), which check their own rules.
     """
 
-    model: str = field(metadata={CHOICES: network_names})  # depth (Depth-Q-Net) or coll (Coll-Q-Net)
+    model: str = field(metadata={CHOICES: network_names})  # the network, by its registered name
     data: str  # the dataset folder (depthq collect --out)
     # The first n usable training runs (the paper's nested subsets); none: all of them.
     runs: int | None = None
@@ -108,16 +110,6 @@ class TrainConfig:
     action_scale: float = 10.0
     # Side of the square image the trunk sees, in pixels.
     input_size: int = INPUT_SIZE
-    # Depth-Q-Net's L1 loss over the bins (`depthq.blocks.losses.depth_l1_loss`)
-    depth_loss: DepthLoss = "original"
-    # Depth-Q-Net's lookahead K (docs/design.md#lookahead): the depth bins at t+1 … t+K predicted from
-    # the K actions taken; 1 is the paper's one-step net. Not `samples.horizon`, which is Coll-Q-Net's
-    # collision-target window (5 frames) and also sets which samples Depth-Q-Net drops: the two are
-    # separate settings (a lookahead of 3 with the original's targets keeps horizon 5). Coll-Q-Net: 1.
-    lookahead: int = 1
-    # Weight of lookahead step k in the loss: lookahead_discount ** (k − 1). 1 weighs every step alike
-    # (each is a measured frame, and the selection rule's minimum over the steps needs them all).
-    lookahead_discount: float = 1.0
     # P > 0 projects the frozen trunk's feature to P numbers before the head (docs/design.md#heads): a
     # fixed linear map, the top-P principal directions of this training's training features, fitted
     # when it starts. The paper's head took 256 (257 → 4096 with the action), ours 1280: 5× the first
@@ -126,25 +118,6 @@ class TrainConfig:
     # Width of the head's hidden layer (the paper's 4096); its first layer is most of a head step's
     # arithmetic.
     hidden: int = field(default=4096, metadata=OMIT_DEFAULT)
-    # The head's form: depth_first (the current bins read from the feature, then the next bins from
-    # them and the action), concat (the action appended to the feature: the paper's head) or
-    # per_action (bins per anchor action); none: depth_first for a one-step Depth-Q-Net, else concat.
-    # A Coll-Q-Net or a Depth-Q-Net looking further ahead has only "concat" (docs/design.md#heads).
-    head_form: HeadForm | None = None
-    # The initial bias of Depth-Q-Net's layers that output depth bins, in metres (the paper's: 0). Above 0,
-    # an output unit behind the final ReLU starts alive for every input, so none is dead (always 0, no
-    # reading to the policy) from the initialisation on (docs/oracle_gap.md#dead-bins).
-    output_bias: float = field(default=0.0, metadata=OMIT_DEFAULT)
-    # What Depth-Q-Net's output ReLU passes back in training (docs/design.md#dead-outputs): "relu" its
-    # own gradient (none below 0: a bin below 0 for every input stays 0, a dead output, no reading to
-    # the policy), "straight_through" the gradient as if there were no ReLU, so a bin below 0 where
-    # its target is near is pulled up. The values, and so acting, are the ReLU's either way.
-    bin_gradient: BinGradient = field(default="relu", metadata=OMIT_DEFAULT)
-    # γ > 0 trains Depth-Q-Net on a bootstrapped value instead of the next frame's bins alone
-    # (docs/design.md#bootstrap): per bin (1 − γ)·d_{t+1} + γ·min(d_{t+1}, Q̄(s_{t+1}, a*)), a* the
-    # greedy action of the previous epoch's network Q̄ at the next frame: the nearest depth along the
-    # greedy policy's future, discounted (a safety Bellman equation). 0: the paper's one-step target.
-    bootstrap: float = field(default=0.0, metadata=OMIT_DEFAULT)
     # Each training sample taken mirrored with probability 1/2 (docs/design.md#mirror): the frame
     # flipped left to right (a second feature cache), the action negated, the depth bins reversed; a
     # canyon's mirror image is a canyon, and a turn's effect on it is the mirrored turn's.
@@ -155,6 +128,9 @@ class TrainConfig:
     labels: LabelSource = "lidar"
     # Which frames of the dataset's runs are samples, and their targets (docs/design.md#labels).
     samples: SampleConfig = field(default_factory=SampleConfig)
+    # The network's own settings (`Network.Settings`, e.g. Depth-Q-Net's lookahead): flags `--NAME.FIELD`
+    # (`--depth.lookahead 3`), stored under the network's name; none: its defaults.
+    settings: Any = field(default=None, metadata=tagged("model", network_settings))
     # The weights this checkpoint's policy uses unless told (evaluate --weights): best (lowest
     # validation loss), final (after the last epoch, as the original evaluated them) or average (the
     # last epochs' mean, `average`); none: average when `average` is set, else final for a
@@ -179,7 +155,11 @@ class TrainConfig:
         if self.model not in network_names():
             raise ConfigError(f"train.model must be one of {network_names()}, got {self.model!r}")
         network = get_network(self.model)
-        self._resolve_defaults()
+        if self.settings is None:
+            object.__setattr__(self, "settings", network.Settings())
+        if type(self.settings) is not network.Settings:
+            raise ConfigError(f"train.settings of model {self.model!r} must be its "
+                              f"{network.Settings.__name__}, got {self.settings!r}")
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"train.data must be a dataset folder, got {self.data!r}")
         if self.runs is not None:
@@ -187,20 +167,8 @@ class TrainConfig:
         _int_at_least("seed", self.seed, 0)
         for name in ("epochs", "train_batches", "val_batches", "batch_size", "input_size"):
             _int_at_least(name, getattr(self, name), 1)
-        network.check_lookahead(self.lookahead, "train.lookahead")
-        discount = self.lookahead_discount
-        if isinstance(discount, bool) or not isinstance(discount, int | float) or not 0 < discount <= 1:
-            raise ConfigError(f"train.lookahead_discount must be in (0, 1], got {discount!r}")
         if not isinstance(self.samples, SampleConfig):
             raise ConfigError(f"train.samples must be a SampleConfig, got {self.samples!r}")
-        samples = self.samples
-        steps = samples.min_frames - samples.horizon - 1 - samples.action_lag  # in the shortest usable run
-        if self.lookahead > steps:
-            raise ConfigError(
-                f"train.lookahead {self.lookahead} is more steps than the shortest usable run has after "
-                f"a sample (min_frames - horizon - 1 - action_lag = {steps}): raise samples.min_frames "
-                "or lower it"
-            )
         if self.lr is not None:
             _positive_float("lr", self.lr)
         _positive_float("eps", self.eps)
@@ -209,12 +177,13 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value < high:
                 raise ConfigError(f"train.{name} must be in [{low}, {high}), got {value!r}")
-        check_choices(self, "train")  # trunk, depth_loss, head_form, bin_gradient, labels, weights, precision
+        check_choices(self, "train")  # trunk, labels, weights, precision
         check_tune_stages(self.trunk, self.tune_stages)
         self._check_projection()
         _int_at_least("hidden", self.hidden, 1)
+        network.check_training(self)  # its rules where its own settings meet these
         network.check_head(self.head())  # the head's rules (projection size) and its network's (form)
-        self._check_bootstrap()
+        self._resolve_defaults()
         if not isinstance(self.mirror, bool):
             raise ConfigError(f"train.mirror must be true or false, got {self.mirror!r}")
         if self.mirror and not TRUNKS[self.trunk].frozen:
@@ -229,23 +198,20 @@ class TrainConfig:
             )
 
     def _resolve_defaults(self) -> None:
-        """The defaults that depend on other fields, all resolved here (before any check), so that a
-        stored config names its choice:
+        """The defaults that depend on other fields, all resolved here (once the head is known), so that
+        a stored config names its choice:
 
-        - `head_form` none: the network's own for its lookahead (`Network.default_form`: depth_first
-          for a one-step Depth-Q-Net, else concat);
         - `average` none: its head form's (`DEFAULT_AVERAGE`: 0.25 for depth_first), else 0;
         - `weights` none: average when the training averages, else its head form's
           (`DEFAULT_WEIGHTS`: final for depth_first), else best.
 
         `lr` none is the one left unresolved: configs have always stored it as none (model folders
         are matched on it), and `learning_rate` reads the network's rate (`Network.lr`)."""
-        if self.head_form is None and isinstance(self.lookahead, int):
-            object.__setattr__(self, "head_form", get_network(self.model).default_form(self.lookahead))
+        form = self.head().form
         if self.average is None:
-            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(str(self.head_form), 0.0))
+            object.__setattr__(self, "average", DEFAULT_AVERAGE.get(form, 0.0))
         if self.weights is None:
-            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(str(self.head_form), "best")
+            chosen = "average" if self.average else DEFAULT_WEIGHTS.get(form, "best")
             object.__setattr__(self, "weights", chosen)
 
     def _check_projection(self) -> None:
@@ -265,24 +231,13 @@ class TrainConfig:
                 f"feature size) or 0, got {p}"
             )
 
-    def _check_bootstrap(self) -> None:
-        g = self.bootstrap
-        if isinstance(g, bool) or not isinstance(g, int | float) or not 0 <= g < 1:
-            raise ConfigError(f"train.bootstrap must be in [0, 1) (0: the one-step target), got {g!r}")
-        if g and (not get_network(self.model).bootstraps or self.lookahead != 1
-                  or not TRUNKS[self.trunk].frozen or self.tune_stages):
-            raise ConfigError(
-                f"train.bootstrap {g}: a one-step Depth-Q-Net on a frozen trunk's cached features only "
-                f"(model {self.model!r}, lookahead {self.lookahead}, trunk {self.trunk!r}, tune_stages "
-                f"{self.tune_stages}); use 0"
-            )
-
     def head(self) -> HeadConfig:
-        """The head this training builds."""
-        return HeadConfig(self.model, TRUNKS[self.trunk].feature_dim, hidden=self.hidden,
-                          dropout=self.dropout, action_scale=self.action_scale, lookahead=self.lookahead,
-                          feature_projection=self.feature_projection, form=self.head_form,
-                          output_bias=self.output_bias, bin_gradient=self.bin_gradient)
+        """The head this training builds: its network's (`Network.head_config`) of these settings."""
+        paper = HeadConfig(self.model, TRUNKS[self.trunk].feature_dim, hidden=self.hidden,
+                           dropout=self.dropout, action_scale=self.action_scale, lookahead=1,
+                           feature_projection=self.feature_projection, form="concat", output_bias=0.0,
+                           bin_gradient="relu")
+        return get_network(self.model).head_config(paper, self.settings)
 
     def _check_snapshots(self) -> None:
         if not isinstance(self.snapshots, tuple):
@@ -308,10 +263,6 @@ class TrainConfig:
     def average_from(self) -> int | None:
         """The first epoch whose weights enter the average; None without one."""
         return self.epochs - max(1, math.ceil(self.average * self.epochs)) + 1 if self.average else None
-
-    def step_weights(self) -> tuple[float, ...]:
-        """The loss weight of each lookahead step, t+1 first."""
-        return tuple(float(self.lookahead_discount) ** k for k in range(self.lookahead))
 
     @property
     def learning_rate(self) -> float:

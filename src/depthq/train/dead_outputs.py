@@ -14,11 +14,11 @@ import numpy as np
 import torch
 
 from depthq.blocks.checkpoint import dataset_record, policy_record, read_config
-from depthq.blocks.heads import DepthFirstHead, DepthHead, QNet
+from depthq.blocks.heads import QNet
 from depthq.control.action_selection import candidate_sequences
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
-from depthq.networks.build import load_qnet
+from depthq.networks import get_network, load_qnet
 from depthq.train.features import load_activations, load_features
 
 CHUNK_FRAMES = 256  # frames per head call: their candidates' hidden activations stay ≈ 13 MB at width 4096
@@ -51,8 +51,9 @@ def dead_outputs(values: np.ndarray) -> tuple[int, ...]:
 
 
 def has_bins(net: QNet) -> bool:
-    """Whether a net's outputs are depth bins behind a ReLU (a Depth-Q-Net's), the outputs that can die."""
-    return isinstance(net.head, DepthHead | DepthFirstHead)
+    """Whether a net's outputs are depth bins behind a ReLU (a Depth-Q-Net's), the outputs that can die
+    (its network's `outputs_bins`)."""
+    return get_network(net.head.config.kind).outputs_bins
 
 
 def candidates_of(net: QNet, actions: tuple[float, ...]) -> torch.Tensor:

@@ -18,7 +18,6 @@ when the dataset is not found, the metric is skipped with one line saying so.
 from __future__ import annotations
 
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +44,7 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
     train = config["train"]
     network = get_network(train["model"])
     train_config = from_dict(TrainConfig, train)
-    lookahead = train_config.lookahead
+    lookahead = net.head.config.lookahead
     # scored against the LiDAR's bins whatever the training's labels: the measured depth is the truth
     arrays = network.samples(dataset, "val", None, train_config, labels="lidar")
     actions = torch.from_numpy(np.asarray(arrays["action"], np.float32))
@@ -69,7 +68,7 @@ def offline_metric(checkpoint: Path, dataset: Dataset, weights: str | None = Non
         loss, _ = loss_function(train_config)(outputs, targets)
         return {"metric": network.metric, "value": float(loss), "samples": len(targets), "weights": stem,
                 **dead}
-    one_step = loss_function(replace(train_config, lookahead=1))
+    one_step = network.step_loss(train_config.settings)
     valid = torch.from_numpy(arrays["mask"])
     steps = [float(one_step(outputs[valid[:, k], k], targets[valid[:, k], k])[0]) for k in range(lookahead)]
     return {"metric": network.metric, "value": steps[0], "samples": len(targets), "weights": stem,

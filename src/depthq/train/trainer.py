@@ -71,6 +71,7 @@ def train(
     c = config
     optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
     loss_fn = loss_function(config)
+    gamma = get_network(config.model).bootstrap(config.settings)  # γ > 0: a bootstrapped target
     rng = np.random.default_rng(config.seed)  # training batches
     val_rng = np.random.default_rng([config.seed, 1])  # the same validation batches every epoch
     val_batches = val_set.draw(config.val_batches * config.batch_size, val_rng).split(config.batch_size)
@@ -90,17 +91,18 @@ def train(
     try:
         for epoch in range(state.epoch + 1, config.epochs + 1):
             start = time.perf_counter()
-            if config.bootstrap and epoch > 1:
+            if gamma and epoch > 1:
                 target_head = copy.deepcopy(model.head).eval()
             model.train()
             train_losses = []
             for _ in range(config.train_batches):
                 batch = train_set.batch(train_set.draw(config.batch_size, rng)).to(where)
-                batch = with_target(batch, target_head, config.bootstrap)
+                batch = with_target(batch, target_head, gamma)
                 train_losses.append(train_step(model, train_set, batch, loss_fn, optimizer, config.precision))
                 _check_finite(train_losses[-1], "training", epoch, out, state)
 
-            val_loss, val_loss_std = validate(model, val_set, val_batches, loss_fn, target_head, config)
+            val_loss, val_loss_std = validate(model, val_set, val_batches, loss_fn, target_head, gamma,
+                                              config.precision)
             row = {
                 "epoch": epoch,
                 "train_loss": float(np.mean(train_losses)),
@@ -113,7 +115,8 @@ def train(
             average_loss = None
             if average is not None and epoch >= config.average_from:
                 average.update_parameters(model)
-                average_loss = validate(average.module, val_set, val_batches, loss_fn, target_head, config)
+                average_loss = validate(average.module, val_set, val_batches, loss_fn, target_head, gamma,
+                                        config.precision)
             folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
                               average, average_loss, seconds=round(time.perf_counter() - start, 3))
             for key in ("train_loss", "val_loss", "val_loss_std"):
@@ -128,26 +131,26 @@ def train(
 
 def validate(
     model: QNet, val_set: Samples, val_batches: tuple[torch.Tensor, ...], loss_fn: LossFn,
-    target_head: Head | None, config: TrainConfig,
+    target_head: Head | None, gamma: float = 0.0, precision: str = "fp32",
 ) -> tuple[float, float]:
     """The mean validation loss of `model` over the fixed validation batches, and its mean per-batch
     standard deviation over the samples; in eval mode (no dropout; a trained trunk's BatchNorm uses
-    its running statistics)."""
+    its running statistics). `gamma`: a bootstrapped target's (`with_target`)."""
     model.eval()
     where = next(model.parameters()).device
     losses, stds = [], []
     with torch.no_grad():
         for idx in val_batches:
-            batch = with_target(val_set.batch(idx).to(where), target_head, config.bootstrap)
-            loss, per_sample = loss_fn(predict(model, val_set, batch, config.precision), batch.targets)
+            batch = with_target(val_set.batch(idx).to(where), target_head, gamma)
+            loss, per_sample = loss_fn(predict(model, val_set, batch, precision), batch.targets)
             losses.append(loss.item())
             stds.append(per_sample.std().item())
     return float(np.mean(losses)), float(np.mean(stds))
 
 
 def loss_function(config: TrainConfig) -> LossFn:
-    """The training loss of `config`'s network (`Network.loss_function`)."""
-    return get_network(config.model).loss_function(config)
+    """The training loss of `config`'s network (`Network.loss_function` of its own settings)."""
+    return get_network(config.model).loss_function(config.settings)
 
 
 def with_target(batch: Batch, target_head: Head | None, gamma: float) -> Batch:
@@ -194,7 +197,8 @@ def _samples(
     network = get_network(config.model)
     arrays = {split: network.samples(dataset, split, n, config)
               for split, n in (("train", config.runs), ("val", None))}
-    _check_labels(config, arrays["train"]["target"])
+    network.check_targets(arrays["train"]["target"],
+                          f"the selected training runs of {config.data} (runs={config.runs or 'all'})")
     if config.tune_stages:
         n, size = config.tune_stages, config.input_size
         table = load_activations(dataset, n, size, progress, device)
@@ -206,24 +210,13 @@ def _samples(
         table = load_features(dataset, config.trunk, config.input_size, progress, device)
         mirrored = (load_features(dataset, config.trunk, config.input_size, progress, device, mirrored=True)
                     if config.mirror else None)
-        following = config.bootstrap > 0  # validation is never mirrored: the frames as recorded
+        following = network.bootstrap(config.settings) > 0  # validation is never mirrored: as recorded
         return (FeatureSamples(arrays["train"], table, "train", following, mirrored),
                 FeatureSamples(arrays["val"], table, "val", following))
     if progress:
         Bar.write(f"trunk {config.trunk!r} is trained with the head, on images")
     return (ImageSamples(FrameView(dataset, "train", arrays["train"]), config.input_size, progress),
             ImageSamples(FrameView(dataset, "val", arrays["val"]), config.input_size, progress))
-
-
-def _check_labels(config: TrainConfig, targets: np.ndarray) -> None:
-    """Collision targets with no collision teach nothing."""
-    network = get_network(config.model)
-    if network.view == "collision" and not targets.any():
-        raise ConfigError(
-            f"{network.title} needs collisions, but the selected training runs of "
-            f"{config.data} (runs={config.runs or 'all'}) hold none (no run ended in a bump); "
-            "train --model depth or use more runs"
-        )
 
 
 def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: folder.TrainState) -> None:
