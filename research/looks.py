@@ -113,7 +113,7 @@ class Recipe:
 
 _MANY = (COLOURS, TEXTURED)  # the looks a broad collection is rendered again in
 _TUNED = (("tune_stages", 1),)
-_LIVE = (*_TUNED, ("bin_gradient", "straight_through"))  # and no dead output
+_LIVE = (*_TUNED, ("depth.bin_gradient", "straight_through"))  # and no dead output
 # The recipes of issue #57, each the one before it and one more item: chosen among on `val` (`diagnose`).
 # The labeller's brightness compensation is not a rung: on validation frames it read depth worse
 # (docs/research/camera_labels.md#brightness), so every recipe's labeller keeps the default.
