@@ -44,6 +44,7 @@ from depthq.blocks.checkpoint import policy_record, read_config
 from depthq.configio import from_dict, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.rerender import STRIDE, rendered_looks
+from depthq.data.samples import collision_target
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
 from depthq.networks import get_network, load_qnet
@@ -99,7 +100,7 @@ def measure(checkpoint: Path, weights: str | None = None) -> list[dict[str, Any]
     record = read_config(checkpoint)
     train = from_dict(TrainConfig, record["train"])
     network = get_network(train.model)
-    if network.view != "collision":
+    if type(network).target is not collision_target:  # the collision probability it outputs is measured
         raise ConfigError(f"{checkpoint}: a {network.title}, not a Coll-Q-Net")
     dataset = training_data(record, None)
     if dataset is None:
