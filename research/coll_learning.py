@@ -163,6 +163,7 @@ VARIANTS: dict[str, tuple[dict[str, Any], str | None]] = {
     "dropout": ({"dropout": 0.5}, None),  # the paper's dropout
     "mirror": ({"mirror": True}, None),  # every sample mirrored with probability 1/2
     "dropout+mirror": ({"dropout": 0.5, "mirror": True}, None),
+    "average": ({"average": 0.25, "weights": "average"}, None),  # the last quarter's mean, Depth-Q-Net's way
 }
 
 
