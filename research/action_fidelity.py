@@ -35,6 +35,7 @@ import torch
 from depthq.configio import from_dict
 from depthq.control.action_selection import ACTIONS, depth_scores
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.networks import load_qnet
 from depthq.train.config import TrainConfig
@@ -48,7 +49,7 @@ def fidelity(checkpoint: Path, truth_cache: dict | None = None) -> dict[str, Any
     net, record = load_qnet(checkpoint)
     config = from_dict(TrainConfig, record["train"])
     dataset = Dataset.open(Path(config.data))
-    arrays = view_arrays(dataset, "val", None, "bins", config.samples)
+    arrays = view_arrays(dataset, "val", None, bins_target, config.samples)
     truth = next_bins(dataset, "val", arrays["run_id"], arrays["frame_id"], truth_cache)
     features = load_features(dataset, config.trunk, config.input_size, progress=False).gather("val", arrays)
     with torch.no_grad():

@@ -25,6 +25,7 @@ import numpy as np
 
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.evaluate.oracle import Oracle, drive_oracle
 from depthq.sim.world import WorldConfig
@@ -53,7 +54,8 @@ def oracle_distances(canyons: tuple[str, ...] = ORACLE_CANYONS) -> list[float]:
 
 def constant_baseline(dataset: Dataset) -> float:
     """Validation L1 (m, near bins) of the per-bin median of the training targets."""
-    near = {split: view_arrays(dataset, split, None, target="bins")["target"] for split in ("train", "val")}
+    near = {split: view_arrays(dataset, split, None, target=bins_target)["target"]
+            for split in ("train", "val")}
     valid = {k: np.isfinite(v) & (v < 2.0 - 1e-6) for k, v in near.items()}
     median = np.nanmedian(np.where(valid["train"], near["train"], np.nan), axis=0)
     return float(np.abs(median - near["val"])[valid["val"]].mean())
@@ -69,7 +71,7 @@ def action_effects(dataset: Dataset) -> tuple[np.ndarray, np.ndarray]:
         frame_ids += list(frames)
     truth = next_bins(dataset, "val", np.array(run_ids, int), np.array(frame_ids, int))
     effect = (truth[:, ACTIONS.index(1.0)] - truth[:, ACTIONS.index(-1.0)]) / 2
-    v = view_arrays(dataset, "train", None, target="bins")
+    v = view_arrays(dataset, "train", None, target=bins_target)
     target = np.where(np.isfinite(v["target"]), v["target"], 2.0)
     slope = np.array([np.polyfit(v["action"], target[:, k], 1)[0] for k in range(target.shape[1])])
     return np.nanmean(effect, axis=0), slope

@@ -36,6 +36,7 @@ from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
 from depthq.configio import read_json, write_json
 from depthq.control.action_selection import ACTIONS
 from depthq.data.manifest import Dataset
+from depthq.data.samples import bins_target
 from depthq.data.views import run_then_frame, view_arrays
 from depthq.errors import ConfigError
 from depthq.evaluate.online import parse_canyon_set
@@ -98,7 +99,7 @@ def train_perception(dataset: Dataset, config: TrainConfig) -> torch.nn.Module:
     """A head from the cached image feature to the current frame's 26 bins (invalid as the clip), L1
     over all bins, on the training runs' frames, with `config`'s optimizer and schedule."""
     table = load_features(dataset, config.trunk, config.input_size)
-    arrays = view_arrays(dataset, "train", config.runs, "bins", config.samples)
+    arrays = view_arrays(dataset, "train", config.runs, bins_target, config.samples)
     current = lidar_table(dataset, "bins")
     rows = table.rows("train", arrays["run_id"], arrays["frame_id"])
     features = torch.from_numpy(table.features[rows])

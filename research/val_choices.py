@@ -23,6 +23,7 @@ from typing import Any
 
 from depthq.blocks.checkpoint import read_sidecar
 from depthq.configio import read_json
+from depthq.data.samples import SampleConfig
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.train.config import TrainConfig
 from depthq.train.folder import epoch_seconds
@@ -36,7 +37,8 @@ VARIANTS: dict[str, dict] = {
     "depth_n200": {"model": "depth", "runs": 200, "action_scale": 1.0, "trunk": POOLED},
     "depth_n200_action10": {"model": "depth", "runs": 200, "action_scale": 10.0, "trunk": POOLED},
     "depth_n200_action10_lag1": {
-        "model": "depth", "runs": 200, "action_scale": 10.0, "action_lag": 1, "trunk": POOLED
+        "model": "depth", "runs": 200, "action_scale": 10.0, "samples": SampleConfig(action_lag=1),
+        "trunk": POOLED,
     },
     # the paper's rate
     "coll_n500_lr0.01": {"model": "coll", "runs": 500, "action_scale": 1.0, "lr": 0.01, "trunk": POOLED},
