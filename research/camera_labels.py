@@ -71,6 +71,7 @@ from depthq.sim.canyon import PAPER
 from depthq.train.config import TrainConfig
 from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
+from research.timing import timed
 
 PROG = "python -m research.camera_labels"
 VAL = "val:1000-1019"  # a family's val canyons, far from its datasets' val runs (val:0..89)
@@ -266,9 +267,11 @@ def run(
     folder = out / method
     if not (folder / "labeller" / LABELLER_CONFIG).is_file():
         print(f"labeller {method}: learn on {labeller_config.data} → {folder / 'labeller'}", flush=True)
-    labeller = train_labeller(labeller_config, folder / "labeller", progress=progress, device=device)
-    link_copy(sweep / "data", folder / "data")
-    written, _ = label_dataset(Dataset.open(folder / "data"), load_labeller(labeller), progress=progress)
+    with timed(folder, "labeller"):
+        labeller = train_labeller(labeller_config, folder / "labeller", progress=progress, device=device)
+    with timed(folder, "labels"):
+        link_copy(sweep / "data", folder / "data")
+        written, _ = label_dataset(Dataset.open(folder / "data"), load_labeller(labeller), progress=progress)
     if written:
         print(f"{folder / 'data'}: camera labels written in {written} runs", flush=True)
     write_stats(folder / "data", folder)
@@ -277,7 +280,8 @@ def run(
         checkpoint = folder / "models" / name
         if not finished(checkpoint):
             print(f"train {checkpoint}: camera labels, {origin}", flush=True)
-        train(config, checkpoint, progress=progress, device=device)
+        with timed(folder, f"train {name}"):
+            train(config, checkpoint, progress=progress, device=device)
         evaluate_once(checkpoint, folder / "eval" / name, setup, workers, device, progress)
     evaluate_references(out, setup, runs, seeds, workers, device, progress)
     print(table([out], runs, seeds, evaluate_missing=False))

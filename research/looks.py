@@ -83,6 +83,7 @@ from depthq.train.dead_outputs import count_dead_outputs
 from depthq.train.folder import METRICS, read_metrics
 from depthq.train.offline_metric import offline_metric
 from research import camera_labels
+from research.timing import timed
 
 PROG = "python -m research.looks"
 CANYON = "hard/val:1000"  # the figure's: a val canyon (the docs show no test canyon)
@@ -481,16 +482,18 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset}, recipe {name}")
         pinned = pinned_training(sweep, runs, seeds[0], (*made.training, *training), preset)
         sweep = replace(sweep, train=tuple({**dict(sweep.train), **dict(pinned)}.items()))
-        prepare_data(out, name, sweep, workers, progress)
+        with timed(out / name, "collect and rerender"):
+            prepare_data(out, name, sweep, workers, progress)
         print(f"sweep of recipe {name} → {out / name / 'sweep'}", flush=True)
         run_sweep(sweep, out / name / "sweep", progress=progress, device=device, finish=build_report)
         share_labeller(out, name, method)
-        camera_labels.run(out / name / "sweep", out / name / "camera", method, runs=runs, seeds=seeds,
-                          canyons=choose, time_limit_s=time_limit_s, look=made.look,
-                          labeller_settings=pinned_labeller(method, (*made.labeller, *labeller_settings)),
-                          training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
-                          workers=workers,
-                          device=device, progress=progress)
+        with timed(out / name, "camera labels: labeller, labels, nets, their evaluations"):
+            camera_labels.run(out / name / "sweep", out / name / "camera", method, runs=runs, seeds=seeds,
+                              canyons=choose, time_limit_s=time_limit_s, look=made.look,
+                              labeller_settings=pinned_labeller(method, (*made.labeller, *labeller_settings)),
+                              training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
+                              workers=workers,
+                              device=device, progress=progress)
         if train_only:
             continue
         for drive in drive_looks:
