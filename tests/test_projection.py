@@ -20,12 +20,13 @@ from test_lookahead import _one_step_head_by_hand
 
 from depthq.blocks.heads import QNet, pca_projection
 from depthq.blocks.optim import make_optimizer
+from depthq.checkpoint import load_qnet
 from depthq.cli import main
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.networks import build_head, get_network, load_qnet
+from depthq.networks import build_head, get_network
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
