@@ -155,7 +155,8 @@ def test_a_projected_training_fits_once_and_resumes(projected: Path, tmp_path: P
     assert record["train"]["feature_projection"] == record["head"]["feature_projection"] == 8
     config = _config_of(projected)
     weight, bias = pca_projection(_training_features(config), 8)  # the training split's, refitted
-    inputs = 8 + (config.head_form == "concat")  # the projected feature, and the action if it enters here
+    # the projected feature, and the action if it enters here
+    inputs = 8 + (config.settings.head_form == "concat")
     assert config.head().input_dim == inputs
     for stem in ("best", "last"):
         saved = load_file(projected / f"{stem}.safetensors")
