@@ -32,12 +32,12 @@ from typing import Any
 import numpy as np
 import torch
 
+from depthq.checkpoint import load_qnet
 from depthq.configio import from_dict
 from depthq.control.action_selection import ACTIONS, depth_scores
 from depthq.data.manifest import Dataset
 from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
-from depthq.networks import load_qnet
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
 from research.truth import next_bins

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from depthq.blocks.checkpoint import CONFIG, read_config
+from depthq.checkpoint import CONFIG, read_config, saved_epoch
 from depthq.configio import OMIT_DEFAULT, atomic_write_bytes, from_dict, read_json, to_dict, write_json
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
@@ -69,7 +69,6 @@ from depthq.pipeline.sweep import parse_ints, parse_setting
 from depthq.report.cells import mean_interval
 from depthq.sim.canyon import PAPER
 from depthq.train.config import TrainConfig
-from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
 from research.timing import timed
 

@@ -40,20 +40,19 @@ import numpy as np
 import torch
 from scipy.stats import rankdata
 
-from depthq.blocks.checkpoint import policy_record, read_config
+from depthq.checkpoint import load_qnet, policy_record, read_config, read_metrics
 from depthq.configio import from_dict, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.rerender import STRIDE, rendered_looks
 from depthq.data.samples import collision_target
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
-from depthq.networks import get_network, load_qnet
+from depthq.networks import get_network
 from depthq.report.tables import markdown
 from depthq.sim.canyon import split_family
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import candidates_of
 from depthq.train.features import load_activations, load_features
-from depthq.train.folder import read_metrics
 from depthq.train.offline_metric import training_data
 from depthq.train.trainer import train
 

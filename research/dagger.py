@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from depthq.checkpoint import saved_epoch
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect_and_write
@@ -53,7 +54,6 @@ from depthq.pipeline.sweep import Model, Sweep, parse_ints, retarget, widened
 from depthq.policies.registry import make_policy
 from depthq.report.cells import evaluation_summary, mean_interval
 from depthq.sim.env import CanyonEnv
-from depthq.train.folder import saved_epoch
 from depthq.train.trainer import train
 
 NAMES = {"depth": "Depth-Q-Net", "coll": "Coll-Q-Net"}

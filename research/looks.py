@@ -50,7 +50,7 @@ from PIL import Image, ImageDraw
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from depthq.blocks.checkpoint import CONFIG, chosen_weights, read_config, weights_stem
+from depthq.checkpoint import CONFIG, METRICS, chosen_weights, read_config, read_metrics, weights_stem
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
 from depthq.data.manifest import Dataset
@@ -80,7 +80,6 @@ from depthq.sim.look import BROAD, COLOURS, HELDOUT, LOOKS, TEXTURED, check_look
 from depthq.sim.world import WorldConfig, world_for
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import count_dead_outputs
-from depthq.train.folder import METRICS, read_metrics
 from depthq.train.offline_metric import offline_metric
 from research import camera_labels
 from research.timing import timed

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.blocks.checkpoint import dataset_record, read_config
+from depthq.checkpoint import dataset_record, read_config
 from depthq.data.manifest import Dataset
 from depthq.networks import get_network
 from depthq.policies.qnet import QNetPolicy

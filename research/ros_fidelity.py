@@ -38,6 +38,7 @@ from depthq.deploy.canyon_robot import CanyonRobot, RobotSimConfig
 from depthq.deploy.robot import DriverConfig, Frame, RobotDriver, robot_policy
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
+from depthq.policies.spec import PolicySpec
 from depthq.report.cells import mean_interval
 
 
@@ -87,7 +88,7 @@ def replica(
     settings: list[tuple[float, bool]], bump_hz: float | None = None,
 ) -> dict[str, Any]:
     """Mean distance per (latency, JPEG frames) setting over canyons × seeds, and each run's."""
-    policy, rate, _ = robot_policy(str(checkpoint))
+    policy, rate, _ = robot_policy(PolicySpec("checkpoint", checkpoint))
     rows = []
     for latency, jpeg in settings:
         runs = [replica_run(policy, rate, c, s, latency, jpeg, bump_hz=bump_hz)

@@ -28,7 +28,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from depthq.blocks.checkpoint import dataset_record, read_config
+from depthq.checkpoint import dataset_record, read_config, read_metrics
 from depthq.configio import atomic_write_bytes, read_json, write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import evaluation_done
@@ -39,7 +39,6 @@ from depthq.pipeline.sweep import Sweep, retarget, widened
 from depthq.report.build import build_report
 from depthq.report.cells import mean_interval
 from depthq.report.tables import interval, markdown
-from depthq.train.folder import read_metrics
 
 PROG = "python -m research.sizing"
 CANYONS = {"hard": "hard/val:1000-1019", "paper": "val:1000-1019"}  # the choice canyons of each family

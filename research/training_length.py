@@ -36,7 +36,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import torch
 
-from depthq.blocks.checkpoint import (
+from depthq.checkpoint import (
+    METRICS,
     chosen_weights,
     read_config,
     read_sidecar,
@@ -56,7 +57,6 @@ from depthq.pipeline.sweep import parse_ints
 from depthq.report.build import build_report
 from depthq.report.cells import evaluation_summary, ranks_driving
 from depthq.train.config import TrainConfig
-from depthq.train.folder import METRICS
 from research.oracle_gap import Candidate, Setup, sweep_of
 
 PROG = "python -m research.training_length"

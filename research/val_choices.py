@@ -21,12 +21,11 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from depthq.blocks.checkpoint import read_sidecar
+from depthq.checkpoint import epoch_seconds, read_sidecar
 from depthq.configio import read_json
 from depthq.data.samples import SampleConfig
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.train.config import TrainConfig
-from depthq.train.folder import epoch_seconds
 from depthq.train.trainer import train
 
 CANYONS = "val:1000-1019"

@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from depthq.blocks.checkpoint import (
+from depthq.blocks.heads import DepthFirstHead
+from depthq.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_margin,
     chosen_weights,
@@ -40,7 +41,6 @@ from depthq.blocks.checkpoint import (
     read_config,
     weights_stem,
 )
-from depthq.blocks.heads import DepthFirstHead
 from depthq.configio import write_json
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set

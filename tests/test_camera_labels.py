@@ -15,7 +15,7 @@ import pytest
 from conftest import unchecked
 from safetensors.torch import load_file
 
-from depthq.blocks.checkpoint import read_config
+from depthq.checkpoint import read_config
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.runfile import file_sha256, write_labelled

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from depthq.blocks.checkpoint import read_config
+from depthq.checkpoint import read_config
 from depthq.data.manifest import Dataset
 from research import camera_labels, label_bands
 

@@ -14,19 +14,18 @@ import torch
 from conftest import unchecked
 from safetensors.torch import load_file
 
-from depthq.blocks.checkpoint import FORMAT_VERSION, read_config
+from depthq.checkpoint import FORMAT_VERSION, TrainingCheckpoint, TrainState, load_qnet, read_config
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, at_policy_rate, default_canyons, evaluate
-from depthq.networks import DepthSettings, load_qnet
+from depthq.networks import DepthSettings
 from depthq.policies.qnet import QNetPolicy
+from depthq.policies.spec import PolicySpec
 from depthq.sim.world import DEFAULT_DECISION_HZ
-from depthq.train import trainer
 from depthq.train.config import TrainConfig
-from depthq.train.folder import TrainState
 from depthq.train.trainer import train
 
 FAST = {"train_batches": 1, "val_batches": 1, "batch_size": 16}  # an Adadelta step of the head: ≈ 0.5 s
@@ -108,8 +107,9 @@ def test_a_moved_checkpoint_without_its_data_evaluates_drives_exports_and_benche
     assert json.loads(meta["depthq.actions"]) == [-1.0, 0.0, 1.0]
     # The exported graph evaluates at the rate its metadata records, as the checkpoint does; --hz wins.
     graph = f"onnx:{c / 'onnx' / 'ckpt.onnx'}"
-    assert at_policy_rate(EvalConfig(canyons=("eval:0",), decision_hz=10.0), graph).decision_hz == 10.0
-    assert default_canyons(graph) == default_canyons(ckpt) == "hard/eval"  # its data's family
+    onnx_spec, ckpt_spec = PolicySpec.parse(graph), PolicySpec.parse(ckpt)
+    assert at_policy_rate(EvalConfig(canyons=("eval:0",), decision_hz=10.0), onnx_spec).decision_hz == 10.0
+    assert default_canyons(onnx_spec) == default_canyons(ckpt_spec) == "hard/eval"  # its data's family
     assert main(["evaluate", graph, "--canyons", "eval:0", "--time-limit", "2", "--workers", "1",
                  "--no-video", "--out", "eval-onnx"]) == 0
     summary = read_json(c / "eval-onnx" / "summary.json")
@@ -271,15 +271,15 @@ def test_the_weight_average_is_the_mean_of_the_last_epochs_and_survives_a_resume
     assert _equal({f"head.{k}": v for k, v in net.head.state_dict().items()}, mean)
 
     split = tmp_path / "split"  # interrupted inside the window (after epoch 3's checkpoint), then resumed
-    save_epoch = trainer.folder.save_epoch
+    write_epoch = TrainingCheckpoint.write_epoch
 
-    def interrupted(out: Path, model: object, optimizer: object, rng: object, state: TrainState,
-                    *args: object, **kwargs: object) -> None:
-        save_epoch(out, model, optimizer, rng, state, *args, **kwargs)
+    def interrupted(self: TrainingCheckpoint, model: object, optimizer: object, rng: object,
+                    state: TrainState, *args: object, **kwargs: object) -> None:
+        write_epoch(self, model, optimizer, rng, state, *args, **kwargs)
         if state.epoch == 3:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(trainer.folder, "save_epoch", interrupted)
+    monkeypatch.setattr(TrainingCheckpoint, "write_epoch", interrupted)
     with pytest.raises(KeyboardInterrupt):
         train(config, split, progress=False)
     monkeypatch.undo()

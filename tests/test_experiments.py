@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from depthq.blocks.checkpoint import read_weights
+from depthq.checkpoint import read_weights
 from depthq.errors import ConfigError
 from research import oracle_gap, privileged, training_length
 

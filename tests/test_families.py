@@ -172,6 +172,7 @@ def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_pat
     """A network trained on hard canyons is tested in hard ones unless told otherwise."""
     from depthq.data.recorder import CollectConfig, collect, exploration_env
     from depthq.evaluate.online import default_canyons
+    from depthq.policies.spec import PolicySpec
     from depthq.train.config import TrainConfig
     from depthq.train.trainer import train
 
@@ -179,8 +180,8 @@ def test_a_checkpoint_is_evaluated_in_its_own_familys_canyons_by_default(tmp_pat
     collect(tmp_path / "d", config, progress=False)
     settings = TrainConfig(model="depth", data=str(tmp_path / "d"), epochs=1, train_batches=1, val_batches=1)
     checkpoint = train(settings, tmp_path / "ckpt", progress=False)
-    assert default_canyons(str(checkpoint)) == "hard/eval"
-    assert default_canyons("heuristic") == "eval"
+    assert default_canyons(PolicySpec("checkpoint", checkpoint)) == "hard/eval"
+    assert default_canyons(PolicySpec("heuristic")) == "eval"
 
 
 def test_fresh_streams_are_test_sets_no_project_code_draws_from(tmp_path):

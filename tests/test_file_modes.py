@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from depthq.blocks.checkpoint import weights_bytes
+from depthq.checkpoint import weights_bytes
 from depthq.configio import atomic_write_bytes, temp_sibling, umask, write_json
 from depthq.data.recorder import CollectConfig, collect
 from depthq.data.rosbag import ImportConfig, export_bag, import_bag

@@ -141,10 +141,10 @@ def test_train_help_lists_the_choices_of_every_choice_valued_flag(capsys: pytest
     """Each choice-valued setting is a Literal whose choices come from what owns them (the trunks'
     registry, the losses, the head forms, ...): --help lists them, and a value outside them is refused
     by name, exit 2, on the command line as in a config built otherwise."""
-    from depthq.blocks.checkpoint import WEIGHTS
     from depthq.blocks.heads import HEAD_FORMS
     from depthq.blocks.losses import DEPTH_LOSSES
     from depthq.blocks.trunk import TRUNKS
+    from depthq.checkpoint import WEIGHTS
     from depthq.cli import main
     from depthq.errors import ConfigError
     from depthq.train.config import PRECISIONS, TrainConfig

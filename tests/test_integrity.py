@@ -16,15 +16,14 @@ from pathlib import Path
 
 import pytest
 
-from depthq.blocks.checkpoint import read_sidecar, weights_bytes
 from depthq.blocks.trunk import DEFAULT_TRUNK
+from depthq.checkpoint import load_qnet, read_sidecar, weights_bytes
 from depthq.checksum import KEY
 from depthq.cli import main
 from depthq.configio import read_json, write_json
 from depthq.data.manifest import MANIFEST, Dataset
 from depthq.errors import ConfigError, DataError
 from depthq.lock import exclusive, lock_path
-from depthq.networks import load_qnet
 from depthq.train.features import ARRAY, cache_dir, load_features
 
 FAST = {"train_batches": 8, "val_batches": 1, "batch_size": 16}
@@ -207,7 +206,7 @@ def test_a_killed_feature_computation_is_cleaned_up_and_a_flipped_cache_byte_is_
 
 @pytest.mark.slow
 def test_weight_files_are_byte_identical_across_processes() -> None:
-    code = ("import hashlib, torch\nfrom depthq.blocks.checkpoint import weights_bytes\n"
+    code = ("import hashlib, torch\nfrom depthq.checkpoint import weights_bytes\n"
             "b = weights_bytes({'w': torch.arange(6.0)}, {'epoch': '3', 'state': '{}', 'averaged': 'a+b'})\n"
             "print(hashlib.sha256(b).hexdigest())\n")
     runs = [_python(code) for _ in range(2)]

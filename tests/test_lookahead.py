@@ -249,8 +249,8 @@ def test_train_flag_and_sweep_grid_take_the_lookahead() -> None:
 
 @pytest.mark.slow
 def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: Path, tmp_path: Path) -> None:
+    from depthq.checkpoint import load_qnet
     from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
-    from depthq.networks import load_qnet
     from depthq.policies.qnet import QNetPolicy
     from depthq.policies.registry import make_policy
     from depthq.train.trainer import train

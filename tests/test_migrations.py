@@ -12,14 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from depthq.blocks.checkpoint import (
+from depthq.blocks.heads import HeadConfig
+from depthq.checkpoint import (
     FORMAT_VERSION,
     PolicyRecord,
     dataset_record,
     policy_record,
     read_config,
 )
-from depthq.blocks.heads import HeadConfig
 from depthq.configio import from_dict
 from depthq.networks import DepthSettings, build_head
 from depthq.train.config import TrainConfig
@@ -104,7 +104,7 @@ def test_a_head_record_without_the_fields_added_since_reads_as_it_did(tmp_path: 
     """A checkpoint's "head" written before action_scale, lookahead, feature_projection, form, output_bias
     or bin_gradient (added in that order), or with form "concat" (left out of records until #33), reads
     as the defaults HeadConfig had then, in a version 1 record and a version 3 one alike."""
-    from depthq.blocks.checkpoint import FORMAT
+    from depthq.checkpoint import FORMAT
 
     stored = json.loads((STORED / "checkpoints" / "heads_before_their_fields.json").read_text())
     for n, case in enumerate(stored["cases"]):

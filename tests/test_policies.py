@@ -36,6 +36,7 @@ def test_a_spec_names_a_builtin_an_onnx_file_or_a_checkpoint_folder(tmp_path: Pa
 def test_builtins_build_and_take_the_defaults() -> None:
     assert isinstance(make_policy("heuristic"), DepthHeuristic)
     assert isinstance(make_policy(PolicySpec("ou"), seed=3), OUPolicy)
-    assert decision_rate("heuristic") == DEFAULT_DECISION_HZ and default_canyons(PolicySpec("ou")) == "eval"
+    assert decision_rate(PolicySpec("heuristic")) == DEFAULT_DECISION_HZ
+    assert default_canyons(PolicySpec("ou")) == "eval"
     with pytest.raises(ConfigError, match="unknown policy"):
         make_policy("nowhere")

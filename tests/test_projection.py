@@ -20,12 +20,13 @@ from test_lookahead import _one_step_head_by_hand
 
 from depthq.blocks.heads import QNet, pca_projection
 from depthq.blocks.optim import make_optimizer
+from depthq.checkpoint import load_qnet
 from depthq.cli import main
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
 from depthq.flags import config_from_args
-from depthq.networks import build_head, get_network, load_qnet
+from depthq.networks import build_head, get_network
 from depthq.policies.qnet import BATCH_FRAMES, QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_features
@@ -154,7 +155,8 @@ def test_a_projected_training_fits_once_and_resumes(projected: Path, tmp_path: P
     assert record["train"]["feature_projection"] == record["head"]["feature_projection"] == 8
     config = _config_of(projected)
     weight, bias = pca_projection(_training_features(config), 8)  # the training split's, refitted
-    inputs = 8 + (config.head_form == "concat")  # the projected feature, and the action if it enters here
+    # the projected feature, and the action if it enters here
+    inputs = 8 + (config.settings.head_form == "concat")
     assert config.head().input_dim == inputs
     for stem in ("best", "last"):
         saved = load_file(projected / f"{stem}.safetensors")

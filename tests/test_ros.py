@@ -39,6 +39,7 @@ from depthq.deploy.robot import (
 from depthq.deploy.ros1 import DEBIAN_PACKAGES
 from depthq.deploy.ros_graph import RosGraph, decisions, summary
 from depthq.errors import ConfigError, DataError
+from depthq.policies.spec import PolicySpec
 from research.ros_fidelity import replica_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,7 +120,7 @@ def test_the_driver_decides_at_the_policys_rate_on_the_newest_frame_and_stops_wh
 ) -> None:
     """A 30 Hz camera, a 50 Hz timer: 4 decisions a second, each on the newest frame; stale frames are
     not decided on; the zero twist is out within 0.5 s of the last frame."""
-    policy, rate, frame_size = robot_policy(str(toy_nets["depth"]))
+    policy, rate, frame_size = robot_policy(PolicySpec.parse(str(toy_nets["depth"])))
     assert rate == 4.0 and frame_size is None
     driver = RobotDriver(policy, DriverConfig(decision_hz=rate))
     jpegs = [_jpeg(f) for f in _frames(small_dataset, 6)]
@@ -298,7 +299,7 @@ def test_an_onnx_graph_drives_frames_of_any_size_at_its_recorded_rate(
     small_dataset: Path, toy_nets: dict[str, Path], tmp_path: Path
 ) -> None:
     path = export_onnx(toy_nets["depth"], tmp_path)
-    policy, rate, frame_size = robot_policy(f"onnx:{path}")
+    policy, rate, frame_size = robot_policy(PolicySpec.parse(f"onnx:{path}"))
     assert rate == 4.0 and frame_size == (308, 410)  # the rate from the graph's metadata
     frame = _frames(small_dataset, 1)[0]
     big = np.asarray(Image.fromarray(frame).resize((640, 480), Image.Resampling.BILINEAR))
@@ -308,7 +309,7 @@ def test_an_onnx_graph_drives_frames_of_any_size_at_its_recorded_rate(
     expected = policy.act({"image": fit(big, frame_size)})
     assert command.reason == "decision" and command.twist == Twist(LINEAR_SPEED, expected)
     with pytest.raises(ConfigError, match="learned policy"):
-        robot_policy("heuristic")
+        robot_policy(PolicySpec("heuristic"))
 
 
 @pytest.mark.slow
@@ -338,7 +339,7 @@ def test_the_simulated_robot_moves_by_its_last_command_and_senses_on_schedule() 
 def test_the_replica_applies_each_command_its_latency_after_the_decision(toy_nets: dict[str, Path]) -> None:
     """experiments.ros_fidelity's ROS-free replica, at toy size: the node's core and the simulated robot in
     lock-step; a command decided at t moves the robot from t + latency (its first: the run's start)."""
-    policy, rate, _ = robot_policy(str(toy_nets["depth"]))
+    policy, rate, _ = robot_policy(PolicySpec.parse(str(toy_nets["depth"])))
     runs = [replica_run(policy, rate, "val:1000", 0, latency, jpeg=True, time_limit_s=1.0)
             for latency in (0, 0.1)]
     for run in runs:

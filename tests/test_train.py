@@ -15,6 +15,7 @@ from safetensors.torch import load, load_file, save
 
 from depthq.blocks.optim import make_optimizer
 from depthq.blocks.trunk import DEFAULT_TRUNK, build_trunk, preprocess
+from depthq.checkpoint import load_qnet
 from depthq.cli import main
 from depthq.configio import read_json
 from depthq.data.manifest import Dataset
@@ -23,12 +24,11 @@ from depthq.data.samples import SampleConfig, bins_target
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError, DataError
 from depthq.flags import config_from_args
-from depthq.networks import load_qnet
+from depthq.networks import build_qnet
 from depthq.policies.qnet import QNetPolicy
 from depthq.scripts.train import add_arguments
 from depthq.train.config import TrainConfig
 from depthq.train.features import cache_dir, load_features
-from depthq.train.folder import build_qnet
 from depthq.train.samples import ImageSamples
 from depthq.train.trainer import DivergedError, train
 
@@ -151,8 +151,8 @@ def test_feature_cache_is_reused_and_invalidated(data: Path, tmp_path: Path) -> 
 @pytest.mark.slow
 def test_blocked_adadelta_equals_torch_adadelta() -> None:
     torch.manual_seed(0)
-    a = build_qnet(TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025"))
-    b = build_qnet(TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025"))
+    head = TrainConfig(model="coll", data="-", trunk="mobilenet_v1_025").head()
+    a, b = build_qnet(head, "mobilenet_v1_025"), build_qnet(head, "mobilenet_v1_025")
     b.load_state_dict(a.state_dict())
     opt_a, opt_b = torch.optim.Adadelta(make_optimizer(a, 0.1).param_groups), make_optimizer(b, 0.1)
     images, actions, target = torch.rand(4, 3, 64, 64), torch.rand(4), torch.tensor([0.0, 1.0, 0.0, 1.0])

@@ -24,12 +24,13 @@ from depthq.blocks.trunk import (
     early_trunk_name,
     preprocess,
 )
+from depthq.checkpoint import load_qnet
 from depthq.cli import main
 from depthq.data.manifest import Dataset
 from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
 from depthq.errors import ConfigError, DataError
-from depthq.networks import DepthSettings, load_qnet
+from depthq.networks import DepthSettings
 from depthq.policies.qnet import QNetPolicy
 from depthq.train.config import TrainConfig
 from depthq.train.features import ARRAY, INDEX, cache_dir, load_activations, verify_caches

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from depthq.blocks.checkpoint import (
+from depthq.checkpoint import (
     AVERAGE_TOLERANCE_SE,
     average_fails,
     average_margin,

@@ -12,13 +12,15 @@ source against it, folders and files):
                                             action selection rules (collection drives them)
     ← data                                  collection and the on-disk datasets, ROS 2 bags
     ← blocks                                a network's building blocks: trunks, heads, losses, optimizer,
-                                            checkpoints read back
+                                            the migrations of old records
     ← networks                              Depth-Q-Net, Coll-Q-Net and any network registered by name:
                                             what differs between networks, asked by every layer above
+    ← checkpoint                            the checkpoint folder: its format, the folder a training writes
+                                            once per epoch and resumes, which weights act
     ← policies                              the learned policies (torch or onnxruntime) and
                                             `make_policy`, which builds any policy from its spec
-    ← train                                 the trainer, its checkpoints, and the offline metric that
-                                            re-runs its validation
+    ← train                                 the trainer, and the offline metric that re-runs its
+                                            validation
     ← labellers                             the camera labellers: learned models that estimate depth bins
                                             from the camera (`depthq labeller`, `depthq label`)
     ← evaluate | deploy                     online evaluation and the calibration probe (`depthq probe`) |

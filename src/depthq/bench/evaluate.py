@@ -13,7 +13,7 @@ from depthq.policies.spec import PolicySpec
 
 
 def bench_evaluate(
-    spec: str | PolicySpec,
+    spec: PolicySpec,
     canyons: tuple[str, ...],
     workers: int = 2,
     time_limit_s: float | None = None,
@@ -24,7 +24,7 @@ def bench_evaluate(
     sequential then lock-step: workers' start (processes, policy, simulators) and every run, no files
     written, no offline metric."""
     where = str(resolve_device(device))
-    spec = PolicySpec.parse(spec).resolved()
+    spec = spec.resolved()
     config = at_policy_rate(EvalConfig(canyons=canyons, time_limit_s=time_limit_s, look=look), spec)
     seconds, runs = {}, {}
     for name, lockstep in (("sequential", False), ("lockstep", True)):

@@ -17,6 +17,7 @@ from depthq.networks import DepthQNet, build_head
 from depthq.parallel import cores
 from depthq.policies.qnet import QNetPolicy
 from depthq.policies.registry import make_policy
+from depthq.policies.spec import PolicySpec
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import TrainConfig
 
@@ -24,7 +25,7 @@ BATCH = 20  # the evaluation canyons: one lock-step step of a single worker
 
 
 def bench_policy(
-    specs: list[str] | None = None,
+    specs: list[PolicySpec] | None = None,
     decisions: int = 200,
     device: str = "auto",
     batches: int | None = None,

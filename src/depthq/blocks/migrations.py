@@ -1,5 +1,5 @@
 """Old on-disk shapes read as today's, in one place: one function per version of a checkpoint's
-config.json (`depthq.blocks.checkpoint`), and the old names of the settings renamed or moved since
+config.json (`depthq.checkpoint.format`), and the old names of the settings renamed or moved since
 sweeps named model folders after them (docs/formats.md).
 
     checkpoint_v1   version 1 → 2: weight files gained their SHA-256 (in their own metadata); the
@@ -91,7 +91,7 @@ def migrate_checkpoint(record: dict[str, Any], version: int) -> dict[str, Any]:
 
 def checkpoint_v1(record: dict[str, Any]) -> dict[str, Any]:
     """Version 1 → 2: only the weight files changed (they record their SHA-256; a file without one
-    loads with a warning, `depthq.blocks.checkpoint.read_weights`)."""
+    loads with a warning, `depthq.checkpoint.read_weights`)."""
     return {**record, "format_version": 2}
 
 

@@ -208,7 +208,7 @@ class Dataset:
 
     def fingerprint(self) -> str:
         """SHA-256 of the manifest's run rows (split, index, file hash): equal runs, equal fingerprint.
-        A checkpoint records it (`depthq.blocks.checkpoint.DatasetRecord`), and so does a feature cache."""
+        A checkpoint records it (`depthq.checkpoint.DatasetRecord`), and so does a feature cache."""
         digest = hashlib.sha256()
         for entry in self.entries():
             digest.update(f"{entry.split},{entry.index},{entry.sha256}\n".encode())

@@ -35,13 +35,13 @@ import torch
 from torch import nn
 
 from depthq import __version__
-from depthq.blocks.checkpoint import policy_record
 from depthq.blocks.heads import QNet
+from depthq.checkpoint import load_qnet, policy_record
 from depthq.configio import atomic_write_bytes
 from depthq.control.action_selection import candidate_sequences
 from depthq.deploy.resize import resize_weights
 from depthq.errors import ConfigError
-from depthq.networks import Network, get_network, load_qnet
+from depthq.networks import Network, get_network
 
 OPSET = 18
 
@@ -93,7 +93,7 @@ def export_onnx(
 ) -> Path:
     """Write `checkpoint`'s network to OUT/<checkpoint name>.onnx (atomically) and return its path.
     `weights` (None: the checkpoint's choice), `actions` and `frame_size` (None: the
-    checkpoint's) as in `depthq.blocks.checkpoint`."""
+    checkpoint's) as in `depthq.checkpoint`."""
     try:
         import onnx  # the optional [deploy] extra, as onnxscript: a missing one is a ConfigError
         import onnxscript  # noqa: F401  (what torch.onnx's exporter builds graphs with)

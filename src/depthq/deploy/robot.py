@@ -19,6 +19,7 @@ from PIL import Image, UnidentifiedImageError
 from depthq.control.policy import Policy
 from depthq.deploy.resize import resize_frame
 from depthq.errors import ConfigError, DataError
+from depthq.policies.spec import PolicySpec
 
 LINEAR_SPEED = 0.5  # m/s, the paper's constant forward speed
 RAW_ENCODINGS = ("rgb8", "bgr8", "mono8")  # the `sensor_msgs/Image` encodings a camera driver gives
@@ -103,28 +104,27 @@ def fit(image: np.ndarray, frame_size: tuple[int, int] | None) -> np.ndarray:
 
 
 def robot_policy(
-    spec: str, weights: str | None = None, device: str = "cpu", hz: float | None = None
+    spec: PolicySpec, weights: str | None = None, device: str = "cpu", hz: float | None = None
 ) -> tuple[Policy, float, tuple[int, int] | None]:
     """A learned policy for a robot, 'onnx:PATH' or a checkpoint folder: (the policy, the decision rate
     it was trained at (`hz` if given), the frame size its graph takes, None for a checkpoint's: any)."""
-    from depthq.policies.spec import PolicySpec
-
-    parsed = PolicySpec.parse(spec)
-    if parsed.kind == "onnx":
+    if spec.kind == "onnx":
         from depthq.policies.onnx import OnnxPolicy  # onnxruntime and numpy only, as on a robot
 
-        policy = OnnxPolicy(parsed.path)
+        policy = OnnxPolicy(spec.path)
         rate = hz or policy.decision_hz
         if rate is None:
-            raise ConfigError(f"{parsed.path}: records no decision rate (an older export); give --hz")
+            raise ConfigError(f"{spec.path}: records no decision rate (an older export); give --hz")
         return policy, rate, policy.frame_size
-    if parsed.checkpoint is None:
-        raise ConfigError(f"a robot drives a learned policy, a checkpoint folder or onnx:PATH; got {spec!r}")
-    from depthq.blocks.checkpoint import policy_record, read_config
+    if spec.checkpoint is None:
+        raise ConfigError(
+            f"a robot drives a learned policy, a checkpoint folder or onnx:PATH; got {spec.name!r}"
+        )
+    from depthq.checkpoint import policy_record, read_config
     from depthq.policies.qnet import QNetPolicy
 
-    policy = QNetPolicy.from_checkpoint(parsed.checkpoint, weights=weights, device=device)
-    return policy, hz or policy_record(read_config(parsed.checkpoint)).decision_hz, None
+    policy = QNetPolicy.from_checkpoint(spec.checkpoint, weights=weights, device=device)
+    return policy, hz or policy_record(read_config(spec.checkpoint)).decision_hz, None
 
 
 def twist_for_frame(policy: Policy, frame: np.ndarray) -> Twist:

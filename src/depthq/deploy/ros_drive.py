@@ -25,6 +25,7 @@ from urllib.parse import urlparse
 
 from depthq.deploy.robot import Command, DriverConfig, Frame, RobotDriver, robot_policy
 from depthq.deploy.ros1 import import_rospy, require_master
+from depthq.policies.spec import PolicySpec
 
 BUFFER_BYTES = 1 << 24  # rospy's receive buffer: larger than any frame, or it delivers stale ones
 FORWARD_JUMP_S = 1.0  # the ROS clock running this much ahead of the wall clock between two checks
@@ -45,7 +46,8 @@ class DriveNodeConfig:
 
 
 def run_drive_node(
-    policy_spec: str, config: DriveNodeConfig, driver: dict, weights: str | None = None, device: str = "cpu"
+    policy_spec: PolicySpec, config: DriveNodeConfig, driver: dict, weights: str | None = None,
+    device: str = "cpu",
 ) -> tuple[int, str]:
     """Drive until shutdown; returns the exit status (0, or 1 when the watchdog failed or the master went
     away) and the last statistics line. `driver`: DriverConfig's fields other than the rate (the policy's

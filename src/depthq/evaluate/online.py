@@ -19,7 +19,8 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from depthq.blocks.checkpoint import (
+from depthq.blocks.device import resolve_device
+from depthq.checkpoint import (
     CONFIG,
     chosen_weights,
     dataset_record,
@@ -27,7 +28,6 @@ from depthq.blocks.checkpoint import (
     read_config,
     weights_stem,
 )
-from depthq.blocks.device import resolve_device
 from depthq.configio import (
     OMIT_DEFAULT,
     atomic_write_bytes,
@@ -146,17 +146,16 @@ class EvalConfig:
         return EnvConfig(world=world, time_limit_s=limit)
 
 
-def at_policy_rate(config: EvalConfig, policy_spec: str | PolicySpec) -> EvalConfig:
+def at_policy_rate(config: EvalConfig, spec: PolicySpec) -> EvalConfig:
     """`config`, at the policy's decision rate (`decision_rate`) when it names none."""
     if config.decision_hz is not None:
         return config
-    return replace(config, decision_hz=decision_rate(policy_spec))
+    return replace(config, decision_hz=decision_rate(spec))
 
 
-def decision_rate(policy_spec: str | PolicySpec) -> float:
+def decision_rate(spec: PolicySpec) -> float:
     """The decision rate a checkpoint or an exported graph records (its training data's); the default
     for any other policy, and for a graph that records none (an older export)."""
-    spec = PolicySpec.parse(policy_spec)
     if spec.kind == "onnx":  # the rate is in the graph's metadata (depthq.deploy.onnx_export)
         return OnnxPolicy(spec.path, threads=1).decision_hz or DEFAULT_DECISION_HZ
     if spec.checkpoint is None:
@@ -164,11 +163,10 @@ def decision_rate(policy_spec: str | PolicySpec) -> float:
     return policy_record(read_config(spec.checkpoint)).decision_hz
 
 
-def default_canyons(policy_spec: str | PolicySpec) -> str:
+def default_canyons(spec: PolicySpec) -> str:
     """The evaluation canyons of the family a checkpoint's or an exported graph's data was collected in
     ('eval' for the paper's, 'hard/eval', ...); the paper's for any other policy and for a robot's
     recording."""
-    spec = PolicySpec.parse(policy_spec)
     if spec.kind == "onnx":
         return eval_set(OnnxPolicy(spec.path, threads=1).family or PAPER)
     if spec.checkpoint is None:
@@ -280,7 +278,7 @@ def shares(canyons: tuple[str, ...], lockstep: bool, workers: int) -> list[tuple
 
 
 def drive_canyons(
-    policy_spec: str | PolicySpec,
+    policy_spec: PolicySpec,
     config: EvalConfig,
     workers: int = 2,
     progress: bool = False,
@@ -291,7 +289,6 @@ def drive_canyons(
     """Every canyon of `config` driven by `policy_spec` (a checkpoint by its absolute path) on torch
     `device`, in `executor`'s `workers`: the runs (`RunRecord.result`) in `config.canyons`' order."""
     runs: dict[int, dict[str, Any]] = {}
-    policy_spec = PolicySpec.parse(policy_spec)
     make_worker = partial(_EvalWorker, policy_spec, config, device, video)
     with Bar(
         total=len(config.canyons),
@@ -319,9 +316,10 @@ def evaluate(
     executor: Executor = LOCAL,
     data: Path | None = None,
 ) -> dict[str, Any]:
-    """Evaluate `policy_spec` ('heuristic', 'ou', a checkpoint folder or 'onnx:PATH') and write its
-    files to `out`; a Q-net runs on `device` (`depthq.blocks.device`). `video`: the first canyon as
-    video.mp4 (`depthq.evaluate.video`); the canyons are driven by `executor` (`depthq.parallel`).
+    """Evaluate `policy_spec` (a string is parsed here, once: 'heuristic', 'ou', a checkpoint folder or
+    'onnx:PATH') and write its files to `out`; a Q-net runs on `device` (`depthq.blocks.device`).
+    `video`: the first canyon as video.mp4 (`depthq.evaluate.video`); the canyons are driven by
+    `executor` (`depthq.parallel`).
     `data`: a checkpoint's dataset for the offline metrics, when it is no longer where it was
     (`depthq.train.offline_metric`)."""
     if workers < 1:
@@ -368,7 +366,7 @@ def evaluate(
 def evaluation_done(folder: Path) -> bool:
     """Whether `folder` holds a finished evaluation (its summary.json) of its policy as the policy acts
     now: a checkpoint evaluated with its own default weights must have been driven with the weights it
-    chooses today (`depthq.blocks.checkpoint.chosen_weights`: a weight average that fails its check acts
+    chooses today (`depthq.checkpoint.chosen_weights`: a weight average that fails its check acts
     with the final weights)."""
     path = Path(folder) / SUMMARY
     if not path.is_file():

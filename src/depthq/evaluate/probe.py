@@ -35,6 +35,7 @@ from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, agreement, drive_oracle
 from depthq.networks import DepthQNet
 from depthq.parallel import worker_context
+from depthq.policies.spec import PolicySpec
 from depthq.progress import Bar
 from depthq.sim.env import CanyonEnv
 from depthq.train.config import DEFAULT_EPOCHS, TrainConfig
@@ -89,7 +90,8 @@ def small_dqn(
     collect(data, config, workers=2)
     ckpt = train(TrainConfig(model=DepthQNet.name, data=str(data), runs=runs, epochs=epochs),
                  out / f"{DepthQNet.name}_n{runs}")
-    summary = evaluate(str(ckpt), out / "eval", EvalConfig(canyons=parse_canyon_set(canyons)), video=False)
+    config = EvalConfig(canyons=parse_canyon_set(canyons))
+    summary = evaluate(PolicySpec("checkpoint", ckpt), out / "eval", config, video=False)
     return {**summary["summary"], "offline": summary.get("offline")}
 
 

@@ -35,11 +35,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from depthq.blocks.checkpoint import DIGEST, read_weights, weights_bytes
 from depthq.blocks.device import resolve_device
 from depthq.blocks.losses import DEPTH_CLIP
 from depthq.blocks.optim import make_optimizer
 from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_trunk, preprocess
+from depthq.checkpoint import DIGEST, read_weights, weights_bytes
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import (
     atomic_write_bytes,

@@ -10,9 +10,9 @@ from depthq.networks.depth_q_net import DepthQNet, DepthSettings
 from depthq.networks.coll_q_net import CollQNet
 
 # isort: on
-from depthq.networks.build import build_head, load_qnet
+from depthq.networks.build import build_head, build_qnet
 from depthq.networks.network import Network, NoSettings, Training, ValuePlot
 from depthq.networks.registry import get_network, network_names, register_network
 
 __all__ = ["CollQNet", "DepthQNet", "DepthSettings", "Network", "NoSettings", "Training", "ValuePlot",
-           "build_head", "get_network", "load_qnet", "network_names", "register_network"]
+           "build_head", "build_qnet", "get_network", "network_names", "register_network"]

@@ -6,7 +6,7 @@ Output folder:
     OUT/reproduce.json            the sweep (a preset, or a widened one) and package version of the folder
     OUT/data/                     the dataset (docs/formats.md#dataset) and its feature cache
     OUT/models/<model>/           checkpoints, e.g. models/depth_n200_s1 (see depthq.pipeline.layout and
-                                  depthq.train.folder)
+                                  depthq.checkpoint)
     OUT/eval/<name>/              evaluations: summary.json, runs.csv, trajectories (+ heuristic, ou)
     OUT/stages.json               measured seconds of every stage
     OUT/table1.md|csv, table2.md, fig4_qualitative.png, fig5_convergence.png, success_vs_runs.png,
@@ -26,10 +26,10 @@ from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
-from depthq.blocks.checkpoint import read_config
 from depthq.blocks.device import resolve_device
 from depthq.blocks.migrations import sweep_setup
 from depthq.blocks.trunk import TRUNKS
+from depthq.checkpoint import read_config, saved_epoch, settings_differing
 from depthq.configio import atomic_write_bytes, provenance, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
@@ -38,10 +38,10 @@ from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done
 from depthq.networks import get_network
 from depthq.parallel import LOCAL, Executor, Job
 from depthq.pipeline.sweep import Sweep
+from depthq.policies.spec import PolicySpec
 from depthq.progress import Bar
 from depthq.train.config import TrainConfig
 from depthq.train.features import features_ready, load_features
-from depthq.train.folder import saved_epoch, settings_differing
 from depthq.train.trainer import train
 
 REFERENCES = ("heuristic", "ou")  # the reference policies every sweep evaluates: Table I's last rows
@@ -110,7 +110,8 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     ]
     for ref in REFERENCES:
         folder = out / "eval" / ref
-        drive = partial(evaluate, ref, folder, eval_config, sweep.workers, video=False, executor=executor)
+        drive = partial(evaluate, PolicySpec(ref), folder, eval_config, sweep.workers, video=False,
+                        executor=executor)
         stages.append(Stage(partial(evaluation_done, folder), Job(f"evaluate {ref}", drive)))
     # Every model's training and evaluation is a job of one core (a process of its own, locally one
     # per free core: docs/design.md#overlap): a training on one thread, so its bytes depend on no
@@ -120,8 +121,8 @@ def build_stages(sweep: Sweep, out: Path, device: str = "cpu", executor: Executo
     for model in models:
         config, ckpt, ev = configs[model], out / "models" / model.name, out / "eval" / model.name
         fit = partial(train, config, ckpt, progress=False, device=device, threads=1)
-        drive = partial(evaluate, str(ckpt), ev, eval_config, 1, progress=False, device=device, video=False,
-                        executor=LOCAL)
+        drive = partial(evaluate, PolicySpec("checkpoint", ckpt), ev, eval_config, 1, progress=False,
+                        device=device, video=False, executor=LOCAL)
         stages += [
             Stage(
                 partial(_trained, config, ckpt),
@@ -168,7 +169,8 @@ def _video_of_best(out: Path, sweep: Sweep, eval_config: EvalConfig, device: str
         return
     first = out / "video" / best.name
     config = replace(eval_config, canyons=eval_config.canyons[:1])
-    evaluate(str(out / "models" / best.name), first, config, workers=1, progress=False, device=device)
+    spec = PolicySpec("checkpoint", out / "models" / best.name)
+    evaluate(spec, first, config, workers=1, progress=False, device=device)
     atomic_write_bytes(best / "video.mp4", (first / "video.mp4").read_bytes())
 
 

@@ -12,14 +12,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.blocks.checkpoint import chosen_weights, policy_record, weights_stem
 from depthq.blocks.heads import QNet
 from depthq.blocks.trunk import preprocess
+from depthq.checkpoint import chosen_weights, load_qnet, policy_record, weights_stem
 from depthq.control.action_selection import ACTIONS, Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
-from depthq.networks import get_network, load_qnet
+from depthq.networks import get_network
 
 # Frames per trunk call in `act_batch` (docs/design.md#lockstep): up to 15 a call, each frame's features
 # were those of a one-frame call on both CPUs measured (torch 2.13, one thread), not at 16.
@@ -66,7 +66,7 @@ class QNetPolicy(GreedyPolicy):
         selection: Selection | None = None,
     ) -> QNetPolicy:
         """The policy of a checkpoint folder: `weights` (None: the checkpoint's choice) and
-        `actions` (None: the checkpoint's) as in `depthq.blocks.checkpoint`; `selection` (None: the
+        `actions` (None: the checkpoint's) as in `depthq.checkpoint`; `selection` (None: the
         default rule) for a Depth-Q-Net."""
         net, config = load_qnet(Path(folder), weights=weights)
         kind = config["train"]["model"]

@@ -21,7 +21,7 @@ def make_policy(
     threads: int | None = None,
 ) -> Policy:
     """The policy `spec` names (a string is parsed: `PolicySpec.parse`). A checkpoint's Q-net takes
-    `weights` (`depthq.blocks.checkpoint.weights_stem`, None: the checkpoint's choice) and runs on
+    `weights` (`depthq.checkpoint.weights_stem`, None: the checkpoint's choice) and runs on
     torch `device`. `selection`: how a Depth-Q-Net scores its candidates (None: the default rule;
     docs/design.md#lookahead-selection). `threads`: an ONNX session's (torch's are the process's,
     `torch.set_num_threads`)."""

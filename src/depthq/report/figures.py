@@ -10,10 +10,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from depthq.checkpoint import METRICS, read_metrics
 from depthq.networks import get_network, network_names
 from depthq.pipeline.sweep import Sweep, variant_label
 from depthq.report.tables import collect_results, interval, per_seed
-from depthq.train.folder import METRICS, read_metrics
 
 
 def plot_fig5(out: Path, sweep: Sweep, path: Path) -> None:

@@ -191,10 +191,12 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
         _positive("--workers", args.workers)
         from depthq.bench.evaluate import bench_evaluate  # torch, mujoco: off the CLI's startup
         from depthq.evaluate.online import parse_canyon_set
+        from depthq.policies.spec import PolicySpec
 
         canyons = parse_canyon_set(args.canyons)
         _check_look(args.look)
-        r = bench_evaluate(args.policy, canyons, args.workers, args.time_limit, args.device, args.look)
+        spec = PolicySpec.parse(args.policy)
+        r = bench_evaluate(spec, canyons, args.workers, args.time_limit, args.device, args.look)
         return r, (
             f"{r['policy']} in {r['canyons']} canyons ({r['decisions']} decisions), {r['workers']} "
             f"worker(s): {r['sequential_s']} s one canyon at a time, {r['lockstep_s']} s in lock-step "
@@ -233,8 +235,10 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     if args.threads is not None:
         _positive("--threads", args.threads)
     from depthq.bench.policy import bench_policy  # torch, mujoco: off the CLI's startup
+    from depthq.policies.spec import PolicySpec
 
-    r = bench_policy(args.policy, args.decisions, args.device, args.batches, args.threads, args.switch)
+    specs = [PolicySpec.parse(spec) for spec in args.policy] if args.policy else None
+    r = bench_policy(specs, args.decisions, args.device, args.batches, args.threads, args.switch)
     each = [f"{p['policy']} ({p['candidates']} candidates): {p['ms_median']} ms median ({p['ms_p90']} ms p90)"
             + _in_batch(p, r["batch"]) for p in r["policies"]]
     return r, "per decision: " + "; ".join(each) + f" ({r['threads']} threads)"

@@ -65,6 +65,7 @@ def _drive(args: argparse.Namespace) -> int:
     from depthq.deploy.robot import DriverConfig
     from depthq.deploy.ros1 import import_rospy
     from depthq.deploy.ros_drive import DriveNodeConfig, run_drive_node
+    from depthq.policies.spec import PolicySpec
 
     driver = {"watchdog_s": args.watchdog, "max_age_s": args.max_age}
     if args.max_pixels is not None:
@@ -76,7 +77,8 @@ def _drive(args: argparse.Namespace) -> int:
     if not args.log_every > 0:
         raise ConfigError(f"--log-every must be > 0 s, got {args.log_every}")
     config = DriveNodeConfig(args.image_topic, args.cmd_topic, args.node_name, args.dry_run, args.log_every)
-    status, line = run_drive_node(args.policy, config, driver, weights=args.weights, device=args.device)
+    spec = PolicySpec.parse(args.policy)
+    status, line = run_drive_node(spec, config, driver, weights=args.weights, device=args.device)
     print(line)
     return status
 

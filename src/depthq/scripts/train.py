@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from depthq.blocks.checkpoint import chosen_weights, read_config, read_sidecar
 from depthq.blocks.device import DEVICE_HELP
 from depthq.blocks.migrations import RENAMED_SETTINGS
+from depthq.checkpoint import chosen_weights, read_config, read_sidecar
 from depthq.flags import add_config_arguments, config_from_args, flag_name
 from depthq.train.config import TrainConfig
 

@@ -2,7 +2,6 @@
 
 Modules, one concept each: `config` (every hyper-parameter, `TrainConfig`), `features` (the
 on-disk cache of frozen-trunk features), `samples` (training batches from cached features or from
-images), `folder` (writing the output folder: weights, resume state, metrics; reading a network
-back is `depthq.networks.load_qnet`), `trainer`
-(the loop, `train`). Their speed is measured by `depthq.bench.train` and `depthq.bench.features`.
+images), `trainer` (the loop, `train`, which writes its checkpoint folder through `depthq.checkpoint`
+once per epoch). Their speed is measured by `depthq.bench.train` and `depthq.bench.features`.
 """

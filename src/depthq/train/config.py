@@ -7,10 +7,10 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from depthq.blocks.checkpoint import WEIGHTS
 from depthq.blocks.heads import HeadConfig
 from depthq.blocks.optim import EPS, RHO, WEIGHT_DECAY
 from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, check_tune_stages
+from depthq.checkpoint import WEIGHTS
 from depthq.configio import OMIT_DEFAULT, check_choices, check_seed, tagged
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.samples import SampleConfig

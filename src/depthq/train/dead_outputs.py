@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from depthq.blocks.checkpoint import dataset_record, policy_record, read_config
 from depthq.blocks.heads import QNet
+from depthq.checkpoint import dataset_record, load_qnet, policy_record, read_config
 from depthq.control.action_selection import candidate_sequences
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError
-from depthq.networks import get_network, load_qnet
+from depthq.networks import get_network
 from depthq.train.features import load_activations, load_features
 
 CHUNK_FRAMES = 256  # frames per head call: their candidates' hidden activations stay ≈ 13 MB at width 4096

@@ -24,12 +24,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from depthq.blocks.checkpoint import chosen_weights, dataset_record, policy_record, weights_stem
 from depthq.blocks.trunk import preprocess
+from depthq.checkpoint import chosen_weights, dataset_record, load_qnet, policy_record, weights_stem
 from depthq.configio import from_dict
 from depthq.data.manifest import Dataset
 from depthq.errors import ConfigError, DataError
-from depthq.networks import get_network, load_qnet
+from depthq.networks import get_network
 from depthq.train.config import TrainConfig
 from depthq.train.dead_outputs import candidates_of, dead_in, has_bins
 from depthq.train.features import load_activations, load_features

@@ -22,13 +22,13 @@ from depthq.blocks.heads import Head, QNet
 from depthq.blocks.losses import LossFn
 from depthq.blocks.optim import make_optimizer
 from depthq.blocks.trunk import TRUNKS
+from depthq.checkpoint import TrainingCheckpoint, TrainState
 from depthq.data.manifest import Dataset
 from depthq.data.views import FrameView
 from depthq.errors import ConfigError
-from depthq.networks import get_network
+from depthq.networks import build_qnet, get_network
 from depthq.parallel import cores
 from depthq.progress import Bar
-from depthq.train import folder
 from depthq.train.bootstrap import bootstrapped_targets
 from depthq.train.config import TrainConfig
 from depthq.train.features import load_activations, load_features
@@ -42,7 +42,8 @@ class DivergedError(ConfigError):
 def train(
     config: TrainConfig, out: Path, progress: bool = True, device: str = "auto", threads: int | None = None
 ) -> Path:
-    """Train `config` into the folder `out` (layout: `depthq.train.folder`) and return it.
+    """Train `config` into the checkpoint folder `out` (`depthq.checkpoint.training`, written once per
+    epoch) and return it.
 
     A folder holding this training resumes from its last epoch, bit for bit as if never stopped (on
     the CPU, with the same `threads`: torch sums floats in an order that depends on their number;
@@ -55,19 +56,17 @@ def train(
     dataset.check_idle()  # not while `depthq label` rewrites its runs
     labeller = dataset.labeller() if config.labels == "camera" else None  # one, or refused
     fingerprint = dataset.fingerprint()
-    resuming = folder.check_folder(out, config, fingerprint)
-    if resuming and folder.saved_epoch(out) >= config.epochs:
+    checkpoint = TrainingCheckpoint.open(out, config, fingerprint)  # refused before anything is read
+    if checkpoint.epochs_done >= config.epochs:
         return out
     train_set, val_set = _samples(config, dataset, progress, where)
-    out.mkdir(parents=True, exist_ok=True)
-    folder.remove_temporaries(out)
     torch.set_num_threads(threads or cores())
-    folder.record_training(out, config, dataset, fingerprint, torch.get_num_threads(), labeller)
+    checkpoint.start(dataset, fingerprint, torch.get_num_threads(), labeller)
     # Adadelta's running averages of tiny gradients reach subnormal floats, which x86 CPUs process
     # ~100× slower: flushed to zero, a head step is 20 ms instead of seconds (a process-wide setting).
     torch.set_flush_denormal(True)
     torch.manual_seed(config.seed)  # head initialisation and dropout
-    model = folder.build_qnet(config).to(where)
+    model = build_qnet(config.head(), config.trunk, config.tune_stages).to(where)
     c = config
     optimizer = make_optimizer(model, c.learning_rate, c.weight_decay, c.rho, c.eps)
     loss_fn = loss_function(config)
@@ -78,7 +77,7 @@ def train(
     # The weight average (`TrainConfig.average`); buffers too, so a trained trunk's BatchNorm statistics
     # are those of the averaged epochs.
     average = AveragedModel(model, use_buffers=True) if config.average else None
-    state = folder.load_state(out, model, optimizer, rng, average, config.average_from)
+    state = checkpoint.resume(model, optimizer, rng, average)
     if config.feature_projection and not state.epoch:  # a resumed training's is in its checkpoint
         # On the training samples' cached features (a frozen trunk's: TrainConfig allows no other),
         # never the validation split's.
@@ -111,14 +110,14 @@ def train(
             }
             _check_finite(row["val_loss"], "validation", epoch, out, state)
             is_best = state.best is None or row["val_loss"] < state.best["val_loss"]
-            state = folder.TrainState(epoch, [*state.history, row], row if is_best else state.best)
+            state = TrainState(epoch, [*state.history, row], row if is_best else state.best)
             average_loss = None
             if average is not None and epoch >= config.average_from:
                 average.update_parameters(model)
                 average_loss = validate(average.module, val_set, val_batches, loss_fn, target_head, gamma,
                                         config.precision)
-            folder.save_epoch(out, model, optimizer, rng, state, is_best, epoch in config.snapshots,
-                              average, average_loss, seconds=round(time.perf_counter() - start, 3))
+            checkpoint.write_epoch(model, optimizer, rng, state, is_best, average, average_loss,
+                                   seconds=round(time.perf_counter() - start, 3))
             for key in ("train_loss", "val_loss", "val_loss_std"):
                 tb.add_scalar(f"loss/{key}", row[key], epoch)
             bar.set_postfix(train=f"{row['train_loss']:.4f}", val=f"{row['val_loss']:.4f}")
@@ -219,7 +218,7 @@ def _samples(
             ImageSamples(FrameView(dataset, "val", arrays["val"]), config.input_size, progress))
 
 
-def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: folder.TrainState) -> None:
+def _check_finite(loss: float, phase: str, epoch: int, out: Path, state: TrainState) -> None:
     if not math.isfinite(loss):
         kept = (f"the last good checkpoint (epoch {state.epoch}) is kept in {out}" if state.epoch
                 else f"no epoch finished, so {out} holds no weights")

@@ -1,10 +1,6 @@
-"""The checkpoint format, in one place: config.json (what was trained, for which policy, on which
-data), the weight files and their digests, the format's version, and reading one back (its network is
-built by `depthq.networks.load_qnet`, which knows the networks).
-
-This sits below both `depthq.train` (which writes checkpoints, and its own training files: see
-`depthq.train.folder`) and `depthq.policies` (which read them), so a policy needs nothing from
-training, nor the dataset: a checkpoint folder describes itself.
+"""The checkpoint format: config.json (what was trained, for which policy, on which data), the weight
+files and their digests, the sidecars, the format's version and its migrations. `depthq.checkpoint.training`
+writes a folder of it, `depthq.checkpoint.acting` reads one back as the network that acts.
 
 config.json (format version 3):
 
@@ -46,7 +42,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -74,11 +69,6 @@ FORMAT = "depthq-checkpoint"
 FORMAT_VERSION = 3
 # TrainConfig.weights: the weights a checkpoint's policy uses by default
 WEIGHTS = ("best", "final", "average")
-# A weight average worse than the final weights on validation by more than this many standard errors
-# is not acted with by default (`average_fails`): 1.1–3.6 for the six broken averages found on `val`
-# (each drove less far than its final weights), at most 0.73 for the others but one (1.02, as far
-# with either) (docs/research/weights_check.md#weights-check).
-AVERAGE_TOLERANCE_SE = 1.0
 DIGEST = "sha256"
 # weights → weight file
 _WEIGHT_FILE = {"best": "best", "last": "last", "final": "last", "average": "average"}
@@ -130,41 +120,6 @@ def weights_stem(weights: str) -> str:
 
 def snapshot_stem(epoch: int) -> str:
     return f"epoch_{epoch:04d}"
-
-
-def chosen_weights(record: dict[str, Any], weights: str | None, folder: Path | None = None) -> str:
-    """`weights`, or when None the checkpoint's own choice (`TrainConfig.weights`), where the weight
-    average fails its check (`average_fails`, given the checkpoint's `folder`) the final weights."""
-    if weights is not None:
-        return weights
-    own = str(record["train"]["weights"])
-    return "final" if own == "average" and folder is not None and average_fails(folder, record) else own
-
-
-def average_margin(folder: Path, record: dict[str, Any]) -> float | None:
-    """The weight average's validation loss (average.json) minus the final weights' (last.json), in
-    standard errors of that difference (the per-sample spreads over the validation samples, taken as
-    independent); None where either record, or its loss, is missing."""
-    try:
-        average, final = read_sidecar(folder, "average"), read_sidecar(folder, "last")
-    except FileNotFoundError:
-        return None
-    keys = ("val_loss", "val_loss_std")
-    samples = record["train"].get("val_batches", 0) * record["train"].get("batch_size", 0)
-    if samples < 1 or not all(isinstance(r.get(k), (int, float)) for r in (average, final) for k in keys):
-        return None
-    error = ((average["val_loss_std"] ** 2 + final["val_loss_std"] ** 2) / samples) ** 0.5
-    difference = average["val_loss"] - final["val_loss"]
-    return difference / error if error > 0 else math.copysign(math.inf, difference) if difference else 0.0
-
-
-def average_fails(folder: Path, record: dict[str, Any]) -> bool:
-    """Whether the weight average is worse than the final weights on validation by more than
-    `AVERAGE_TOLERANCE_SE` standard errors (`average_margin`): averaging an epoch in which an output
-    unit was dead with epochs in which it lived leaves a phantom obstacle the loss shows
-    (docs/research/weights_check.md#weights-check). False where the margin cannot be computed."""
-    margin = average_margin(folder, record)
-    return margin is not None and margin > AVERAGE_TOLERANCE_SE
 
 
 def policy_record(record: dict[str, Any]) -> PolicyRecord:
@@ -294,6 +249,14 @@ def stored_parts(model: QNet) -> list[tuple[str, torch.nn.Module]]:
     return [("head", model.head)] + ([] if trunk is None else [("trunk", trunk)])
 
 
+def trainable_state(model: QNet) -> dict[str, torch.Tensor]:
+    """The weights a checkpoint stores of `model`, named "<part>.<parameter>" (`stored_parts`)."""
+    return {
+        f"{name}.{k}": t.detach().cpu().contiguous()
+        for name, m in stored_parts(model) for k, t in m.state_dict().items()
+    }
+
+
 def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Path) -> None:
     """Put the "<part>.<parameter>" tensors of `path` into `model`'s stored parts."""
     try:
@@ -302,42 +265,3 @@ def load_trainable_state(model: QNet, tensors: dict[str, torch.Tensor], path: Pa
             module.load_state_dict({k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)})
     except RuntimeError as err:
         raise ConfigError(f"{path}: weights do not fit the network of its config.json ({err})") from err
-
-
-def read_checkpoint(
-    folder: Path, weights: str | None = None, model: str | None = None, trunk: str | None = None
-) -> tuple[dict[str, Any], dict[str, torch.Tensor], Path]:
-    """A checkpoint folder's config.json (`read_config`), the tensors of its weights and their file;
-    `depthq.networks.load_qnet` builds the network from them.
-
-    `weights` (`weights_stem`): None takes the checkpoint's own choice (`TrainConfig.weights`).
-    `model` / `trunk`, when given, must be what the folder holds. A missing, incomplete or corrupted
-    folder, or one that does not match → an error naming the file.
-    """
-    folder = Path(folder)
-    if weights is not None:
-        weights_stem(weights)  # a bad value fails before the folder is looked at
-    if not folder.is_dir():
-        raise ConfigError(f"{folder}: no such checkpoint folder")
-    record = read_config(folder)
-    head = record.get("head")
-    kind = head.get("kind") if isinstance(head, dict) else None
-    if not isinstance(kind, str) or not kind:
-        raise ConfigError(f"{folder / CONFIG}: unknown model kind {kind!r}")
-    for asked, held, what in ((model, kind, "model"), (trunk, record.get("trunk"), "trunk")):
-        if asked is not None and asked != held:
-            raise ConfigError(f"{folder} holds a {what} {held!r}, not the {asked!r} asked for")
-    chosen = chosen_weights(record, weights, folder)
-    path = folder / f"{weights_stem(chosen)}.safetensors"
-    if not path.is_file():
-        train = record["train"]
-        if chosen.startswith("epoch:"):
-            why = f"its snapshots are at epochs {train['snapshots']}"
-        elif chosen == "average":
-            why = ("its average's first epoch is not reached yet?" if train.get("average")
-                   else "it was trained without train.average")
-        else:
-            why = "no epoch finished yet?"
-        raise ConfigError(f"{folder}: no {path.name} for weights {chosen!r} ({why})")
-    tensors, _ = read_weights(path)
-    return record, tensors, path
