@@ -830,11 +830,11 @@ def recipe_answers(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2
         for drive in drive_looks:
             camera = _mean(_d2c(_distances(out, "camera", look, drive, seeds)))
             coll = _mean(_d2c(_distances(out, "coll", look, drive, seeds)))
+            ahead += camera is not None and coll is not None and camera > coll
             if camera is None or reference is None:
                 drives.append(f"{drive} –")
                 continue
             shares.append(camera / reference)
-            ahead += coll is not None and camera > coll
             drives.append(f"{drive} {camera / reference:.0%}")
         held = len(shares) == len(drive_looks) and min(shares) >= RECIPE_SHARE and ahead == len(drive_looks)
         first = f"**{'yes' if held else 'no'}**" if len(shares) == len(drive_looks) else f"**{NOT_MEASURED}**"
