@@ -266,9 +266,9 @@ def run(
     folder = out / method
     if not (folder / "labeller" / LABELLER_CONFIG).is_file():
         print(f"labeller {method}: learn on {labeller_config.data} → {folder / 'labeller'}", flush=True)
-    with timed(folder, "labeller"):
+    with timed(folder, "labeller", done=(folder / "labeller" / LABELLER_CONFIG).is_file()):
         labeller = train_labeller(labeller_config, folder / "labeller", progress=progress, device=device)
-    with timed(folder, "labels"):
+    with timed(folder, "labels", done=(folder / "stats.json").is_file()):  # written once labelled
         link_copy(sweep / "data", folder / "data")
         written, _ = label_dataset(Dataset.open(folder / "data"), load_labeller(labeller), progress=progress)
     if written:
@@ -279,7 +279,7 @@ def run(
         checkpoint = folder / "models" / name
         if not finished(checkpoint):
             print(f"train {checkpoint}: camera labels, {origin}", flush=True)
-        with timed(folder, f"train {name}"):
+        with timed(folder, f"train {name}", done=finished(checkpoint)):
             train(config, checkpoint, progress=progress, device=device)
         evaluate_once(checkpoint, folder / "eval" / name, setup, workers, device, progress)
     evaluate_references(out, setup, runs, seeds, workers, device, progress)

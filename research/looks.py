@@ -481,18 +481,18 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         sweep = widened(sweep, runs, subsets=(runs,), seeds=seeds, name=f"{preset}, recipe {name}")
         pinned = pinned_training(sweep, runs, seeds[0], (*made.training, *training), preset)
         sweep = replace(sweep, train=tuple({**dict(sweep.train), **dict(pinned)}.items()))
-        with timed(out / name, "collect and rerender"):
+        prepared = not made.rerender or (out / name / "sweep" / "stages.json").is_file()  # its sweep began
+        with timed(out / name, "collect and rerender", done=prepared):
             prepare_data(out, name, sweep, workers, progress)
         print(f"sweep of recipe {name} → {out / name / 'sweep'}", flush=True)
         run_sweep(sweep, out / name / "sweep", progress=progress, device=device, finish=build_report)
         share_labeller(out, name, method)
-        with timed(out / name, "camera labels: labeller, labels, nets, their evaluations"):
-            camera_labels.run(out / name / "sweep", out / name / "camera", method, runs=runs, seeds=seeds,
-                              canyons=choose, time_limit_s=time_limit_s, look=made.look,
-                              labeller_settings=pinned_labeller(method, (*made.labeller, *labeller_settings)),
-                              training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
-                              workers=workers,
-                              device=device, progress=progress)
+        camera_labels.run(out / name / "sweep", out / name / "camera", method, runs=runs, seeds=seeds,
+                          canyons=choose, time_limit_s=time_limit_s, look=made.look,
+                          labeller_settings=pinned_labeller(method, (*made.labeller, *labeller_settings)),
+                          training=tuple((k, v) for k, v in pinned if k != "labels"),  # camera's own
+                          workers=workers,
+                          device=device, progress=progress)
         if train_only:
             continue
         for drive in drive_looks:

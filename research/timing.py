@@ -15,12 +15,14 @@ TIMES = "times.json"
 
 
 @contextmanager
-def timed(folder: Path, step: str) -> Iterator[None]:
-    """`step`'s wall-clock seconds added to folder/times.json when it returns (a resumed step adds what it
-    did again: a finished one the seconds it takes to see so), so an interrupted job's total is the
+def timed(folder: Path, step: str, done: bool = False) -> Iterator[None]:
+    """`step`'s wall-clock seconds added to folder/times.json when it returns, unless it was `done`
+    before it began (a resumed job rewrites nothing it finished); an interrupted step's total is the
     sum of its tries."""
     start = time.monotonic()
     yield
+    if done:
+        return
     path = Path(folder) / TIMES
     times = read_json(path) if path.is_file() else {}
     times[step] = round(times.get(step, 0.0) + time.monotonic() - start, 1)
