@@ -51,7 +51,7 @@ from depthq.networks import get_network
 from depthq.report.tables import markdown
 from depthq.sim.canyon import split_family
 from depthq.train.config import TrainConfig
-from depthq.train.dead_outputs import candidates_of
+from depthq.train.dead_outputs import candidates_of, net_features
 from depthq.train.features import load_activations, load_features
 from depthq.train.offline_metric import training_data
 from depthq.train.trainer import train
@@ -66,6 +66,11 @@ def auc(scores: np.ndarray, positive: np.ndarray) -> float:
         return float("nan")
     ranks = rankdata(scores)
     return float((ranks[positive].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+
+
+def look_of(dataset: Dataset) -> str | None:
+    """The look a dataset's runs were collected in (None: the collector's default)."""
+    return dataset.config.get("env", {}).get("world", {}).get("look")
 
 
 def bce(p: np.ndarray, y: np.ndarray) -> float:
@@ -105,16 +110,14 @@ def measure(checkpoint: Path, weights: str | None = None) -> list[dict[str, Any]
     if dataset is None:
         raise ConfigError(f"{checkpoint}: its dataset is not found")
     net, _ = load_qnet(checkpoint, weights=weights)
+    size = train.input_size  # the frozen trunk's features, or a tuned one's early activations, read once
+    table = (load_activations(dataset, train.tune_stages, size, progress=False) if train.tune_stages
+             else load_features(dataset, train.trunk, size, progress=False))
     inputs, targets = {}, {}
     for split in ("train", "val"):
         arrays = network.samples(dataset, split, train.runs if split == "train" else None, train)
         with torch.no_grad():
-            if train.tune_stages:
-                table = load_activations(dataset, train.tune_stages, train.input_size, progress=False)
-                feature = net.trunk.late_features(table.gather(split, arrays).float())
-            else:
-                feature = load_features(dataset, train.trunk, train.input_size, progress=False).gather(
-                    split, arrays).float()
+            feature = net_features(net, table.gather(split, arrays).float())
         action = torch.from_numpy(np.asarray(arrays["action"], np.float32))
         inputs[split] = (feature, action, arrays)
         targets[split] = np.asarray(arrays["target"], np.float32)
@@ -133,7 +136,7 @@ def measure(checkpoint: Path, weights: str | None = None) -> list[dict[str, Any]
     p_probe = probe(x_train, torch.from_numpy(targets["train"]), x_val)
     rate = float(targets["train"].mean())
     entries = dataset.entries("val")
-    looks = {0: dataset.config.get("env", {}).get("world", {}).get("look") or "collected"}
+    looks = {0: look_of(dataset) or "collected"}
     looks.update({k: look for k, (look, _) in rendered_looks(dataset).items()})
     version = np.array([entries[int(r)].index // STRIDE for r in arrays["run_id"]])
     metrics = read_metrics(checkpoint)
@@ -174,7 +177,7 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
         raise ConfigError(f"--canyons {canyons!r}: the eval canyons are the test set; choose in val ones")
     base = read_config(like)
     train_config = from_dict(TrainConfig, base["train"])
-    look = look or Dataset.open(Path(train_config.data)).config.get("env", {}).get("world", {}).get("look")
+    look = look or look_of(Dataset.open(Path(train_config.data)))
     results_path = out / "results.json"
     results: dict[str, Any] = read_json(results_path) if results_path.is_file() else {}
     for name in variants:

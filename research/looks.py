@@ -581,6 +581,14 @@ DIAGNOSIS = {"distance_to_collision_mean": ("m to first collision", ".2f"),
              "same_decision_new_noise": ("same decision, frame rendered again", ".1%")}
 
 
+def _agreement_records(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]
+                       ) -> list[dict[str, Any]]:
+    """`diagnose`'s agreement summaries of `net` trained in `look`, driven in `drive`, per seed measured."""
+    where = diagnosis_folder(out, look, drive)
+    return [read_checked_json(p, FIX) for seed in seeds
+            if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
+
+
 def diagnosis_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: tuple[str, ...] = (TEXTURED,),
                    drive_looks: tuple[str, ...] = (TEXTURED, HELDOUT), nets: tuple[str, ...] = DIAGNOSE_NETS
                    ) -> list[dict[str, str]]:
@@ -591,9 +599,7 @@ def diagnosis_rows(out: Path, seeds: tuple[int, ...] = (0, 1, 2), train_looks: t
     for net in nets:
         for look in train_looks:
             for drive in drive_looks:
-                where = diagnosis_folder(out, look, drive)
-                found = [read_checked_json(p, FIX) for seed in seeds
-                         if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
+                found = _agreement_records(out, net, look, drive, seeds)
                 row = {"Q-net": NETS[net], "trained in": look, "driven in": drive, "seeds": str(len(found))}
                 for key, (title, spec) in DIAGNOSIS.items():
                     values = [float(f[key]) for f in found if f.get(key) is not None]
@@ -799,9 +805,7 @@ def _mean(values: list[float]) -> float | None:
 
 
 def _agreements(out: Path, net: str, look: str, drive: str, seeds: tuple[int, ...]) -> list[float]:
-    where = diagnosis_folder(out, look, drive)
-    found = [read_checked_json(p, FIX) for seed in seeds
-             if (p := agreement_file(where, f"{net}_s{seed}", Oracle(), ".json")).is_file()]
+    found = _agreement_records(out, net, look, drive, seeds)
     return [float(f["agreement_decisive"]) for f in found if f.get("agreement_decisive") is not None]
 
 

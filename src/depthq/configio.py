@@ -59,7 +59,7 @@ def _as_dict(value: Any) -> Any:
         out = {}
         for f in dataclasses.fields(value):
             item = getattr(value, f.name)
-            if f.metadata.get("omit_default") and item == _default(f):
+            if f.metadata.get("omit_default") and item == field_default(f):
                 continue
             key = getattr(value, f.metadata[TAGGED][0]) if TAGGED in f.metadata else f.name
             out[key] = _as_dict(item)
@@ -82,10 +82,16 @@ def field_paths(record: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def _default(f: dataclasses.Field) -> Any:
+def field_default(f: dataclasses.Field) -> Any:
+    """A dataclass field's default (its factory's value), or `dataclasses.MISSING` without one."""
     if f.default is not dataclasses.MISSING:
         return f.default
     return f.default_factory() if f.default_factory is not dataclasses.MISSING else dataclasses.MISSING
+
+
+def tag_default(cls: type, tag: str) -> Any:
+    """The default of the field `tag` of dataclass `cls`: the tag value a config has unless told."""
+    return field_default(next(f for f in dataclasses.fields(cls) if f.name == tag))  # type: ignore[arg-type]
 
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
@@ -100,7 +106,7 @@ def from_dict(cls: type[T], data: dict[str, Any]) -> T:
     if found is not None:
         f, tag, classes = found
         names.discard(f.name)
-        chosen = data.get(tag, _default(next(g for g in dataclasses.fields(cls) if g.name == tag)))
+        chosen = data.get(tag, tag_default(cls, tag))
         if isinstance(chosen, str) and chosen in data:
             if chosen not in classes:
                 raise ConfigError(f"{cls.__name__}: {tag} {chosen!r} has no settings of its own")

@@ -32,7 +32,7 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
-from depthq.configio import TAGGED, choices, tagged_field
+from depthq.configio import TAGGED, choices, field_default, tag_default, tagged_field
 from depthq.errors import ConfigError
 
 T = TypeVar("T")
@@ -82,7 +82,7 @@ def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
-        value = getattr(default, f.name) if default is not None else _default(f)
+        value = getattr(default, f.name) if default is not None else field_default(f)
         if TAGGED in f.metadata:
             tag, classes = f.metadata[TAGGED]
             chosen = classes() if default is None else {getattr(default, tag): type(value)}
@@ -197,7 +197,7 @@ def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) ->
         elif base is not None:
             inner_base = getattr(base, name)
         else:
-            inner_base = _default(fields[name])
+            inner_base = field_default(fields[name])
         inner_base = None if inner_base is dataclasses.MISSING else inner_base
         own[name] = build_config(hints[name], inner, inner_base)
     return dataclasses.replace(base, **own) if base is not None else cls(**own)  # type: ignore[type-var]
@@ -211,11 +211,7 @@ def _build_tagged(cls: type, own: dict[str, Any], nested: dict[str, dict[str, An
     if found is None:
         return
     f, tag, classes = found
-    if tag in own:
-        chosen = own[tag]
-    else:
-        chosen = getattr(base, tag) if base is not None else _default(next(
-            g for g in dataclasses.fields(cls) if g.name == tag))  # type: ignore[arg-type]
+    chosen = own.get(tag, getattr(base, tag) if base is not None else tag_default(cls, tag))
     same = base is not None and getattr(base, tag) == chosen
     for name in [n for n in nested if n in classes and n not in own]:
         inner = nested.pop(name)
@@ -298,14 +294,6 @@ def _group(
         title = f"{cls.__name__}.{where}: {owner.__name__} (--{where.replace('_', '-')}.*)"
     summary = (inspect.getdoc(owner) or "").split("\n\n")[0].replace("\n", " ")
     return parser.add_argument_group(title, summary.replace("%", "%%"))
-
-
-def _default(f: dataclasses.Field) -> Any:
-    if f.default is not dataclasses.MISSING:
-        return f.default
-    if f.default_factory is not dataclasses.MISSING:
-        return f.default_factory()
-    return dataclasses.MISSING
 
 
 def _show(value: Any) -> str:
