@@ -41,12 +41,14 @@ import torch
 from scipy.stats import rankdata
 
 from depthq.checkpoint import load_qnet, policy_record, read_config, read_metrics
+from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import from_dict, read_json, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.rerender import STRIDE, rendered_looks
 from depthq.data.samples import collision_target
 from depthq.errors import ConfigError, guarded
 from depthq.evaluate.online import EvalConfig, evaluate, evaluation_done, parse_canyon_set
+from depthq.lock import exclusive
 from depthq.networks import get_network
 from depthq.report.tables import markdown
 from depthq.sim.canyon import split_family
@@ -56,6 +58,7 @@ from depthq.train.features import load_activations, load_features
 from depthq.train.offline_metric import training_data
 from depthq.train.trainer import train
 
+FIX = "remove it and rerun `python -m research.coll_learning run` to measure it again"
 PROBE_STEPS, PROBE_L2 = 200, 1e-3  # the probe's L-BFGS steps and L2 weight (on standardised inputs)
 
 
@@ -179,7 +182,7 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
     train_config = from_dict(TrainConfig, base["train"])
     look = look or look_of(Dataset.open(Path(train_config.data)))
     results_path = out / "results.json"
-    results: dict[str, Any] = read_json(results_path) if results_path.is_file() else {}
+    results: dict[str, Any] = read_checked_json(results_path, FIX) if results_path.is_file() else {}
     for name in variants:
         settings, weights = VARIANTS[name]
         trained = "pinned" if not settings else name
@@ -193,7 +196,7 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
         row["variant"] = name
         row["distance"] = read_json(driven / "summary.json")["summary"]["distance_to_collision_mean"]
         results[name] = row
-        write_json(results_path, results)
+        write_checked_json(results_path, results)
         print(f"{name}: {row['distance']:.2f} m, AUC {row['auc']:.3f}, spread {row['spread']:.3f}",
               flush=True)
     print(table([results[name] for name in variants], first="variant"))
@@ -230,7 +233,8 @@ def main(argv: list[str] | None = None) -> int:
 
     def work() -> int:
         if args.verb == "run":
-            return run(args.like, args.out, tuple(args.variants.split(",")), args.canyons, args.look)
+            with exclusive(args.out, "OUT"):  # one writer per experiment folder
+                return run(args.like, args.out, tuple(args.variants.split(",")), args.canyons, args.look)
         rows = [row for checkpoint in args.checkpoints for row in measure(checkpoint)]
         print(table(rows))
         if args.json:

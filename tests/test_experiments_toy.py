@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import research
+from depthq.checksum import read_checked_json
 from depthq.control.action_selection import ACTIONS
 from depthq.control.ou import OUConfig, OUPolicy
 from depthq.data.manifest import Dataset
@@ -174,7 +175,7 @@ def test_coll_learning_measures_a_coll_q_net_and_trains_drives_and_resumes_its_v
     out = tmp_path / "chances"
     argv = ["run", str(like), str(out), "--variants", "pinned,final", "--canyons", "hard/val:1000"]
     assert coll_learning.main(argv) == 0
-    results = json.loads((out / "results.json").read_text())
+    results = read_checked_json(out / "results.json", coll_learning.FIX)
     assert set(results) == {"pinned", "final"} and not (out / "models" / "final").exists()  # one training
     summary = json.loads((out / "eval" / "final" / "summary.json").read_text())
     assert summary["config"]["weights"] == "final" and summary["config"]["canyons"] == ["hard/val:1000"]
