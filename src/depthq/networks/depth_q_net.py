@@ -99,11 +99,12 @@ class DepthSettings:
 
 @dataclass(frozen=True)
 class Selection:
-    """How a Depth-Q-Net policy makes and scores its candidates: its acting settings
-    (`Network.Acting`, `--depth.rule` ...), not training ones. Switched sequences are off by default:
-    the policy re-plans every frame, so holding is what it commits to, and OU exploration (a
-    step-to-step correlation of 0.95) rarely reverses within K frames, so switched sequences are
-    predicted from few training examples."""
+    """Depth-Q-Net's own acting settings (`Network.Acting`): how its policy makes and scores its
+    candidates, an evaluation's settings, not a training's.
+
+    Switched sequences are off by default: the policy re-plans every frame, so holding is what it
+    commits to, and OU exploration (a step-to-step correlation of 0.95) rarely reverses within K
+    frames, so switched sequences are predicted from few training examples."""
 
     # How a lookahead Depth-Q-Net scores its candidate sequences: discounted_nearest_bin or
     # farthest_nearest_bin (docs/design.md#lookahead-selection). A one-step net's choice is the same
