@@ -52,7 +52,7 @@ import matplotlib.pyplot as plt
 
 from depthq.checkpoint import CONFIG, METRICS, chosen_weights, read_config, read_metrics, weights_stem
 from depthq.checksum import read_checked_json, write_checked_json
-from depthq.configio import atomic_write_bytes, field_paths, read_json, write_json
+from depthq.configio import atomic_write_bytes, field_paths, read_json, to_dict, write_json
 from depthq.data.manifest import Dataset
 from depthq.data.recorder import CollectConfig, collect, collection_complete
 from depthq.data.rerender import rerender
@@ -568,9 +568,9 @@ def _driven_as(folder: Path, config: EvalConfig) -> bool:
     (`run` drove it where `diagnose` would: its runs are measured instead of driving them again)."""
     if not evaluation_done(folder):
         return False
-    held, wanted = read_json(folder / "summary.json")["config"], json.loads(json.dumps(asdict(config)))
+    held, wanted = read_json(folder / "summary.json")["config"], to_dict(config)
     keys = ("canyons", "look") if config.time_limit_s is None else ("canyons", "look", "time_limit_s")
-    return all(held.get(key) == wanted[key] for key in keys)  # none: the family's, as `run` resolved it
+    return all(held.get(key) == wanted.get(key) for key in keys)  # none (left out): the family's
 
 
 DIAGNOSIS = {"distance_to_collision_mean": ("m to first collision", ".2f"),

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from depthq.cli import VERBS, build_parser
-from depthq.configio import TAGGED
+from depthq.configio import KEYED, TAGGED, Keyed, complete_keyed, from_dict, keyed, to_dict
 from depthq.flags import build_config, config_from_args
 
 # Each verb's configs: (verb path, config class, fields it leaves to a flag of its own or has no use
@@ -28,6 +28,9 @@ VERB_CONFIGS = [
     (("sweep",), "depthq.data.recorder:CollectConfig", (), ("runs", "env.world.decision_hz",
                                                             "env.world.family")),
     (("probe",), "depthq.sim.world:WorldConfig", (), ("family",)),
+    # the networks' acting settings, the policies' timed
+    (("bench", "policy"), "depthq.evaluate.online:EvalConfig", (), ("depth.rule", "depth.discount",
+                                                                     "depth.switch")),
 ]
 
 
@@ -38,12 +41,12 @@ def _class(spec: str) -> type:
 
 def _paths(cls: type, prefix: str = "") -> list[str]:
     """Every field of `cls`, nested configs' fields by dotted path, a tagged config's under each of its
-    tag's values (read here, not from depthq.flags)."""
+    tag's values, a keyed field's under each of its names (read here, not from depthq.flags)."""
     hints = typing.get_type_hints(cls)
     out = []
     for f in dataclasses.fields(cls):
-        if TAGGED in f.metadata:
-            classes = f.metadata[TAGGED][1]()
+        if TAGGED in f.metadata or KEYED in f.metadata:
+            classes = f.metadata[TAGGED][1]() if TAGGED in f.metadata else f.metadata[KEYED]()
             out += [path for name, inner in classes.items() for path in _paths(inner, f"{prefix}{name}.")]
         elif dataclasses.is_dataclass(hints[f.name]):
             out += _paths(hints[f.name], f"{prefix}{f.name}.")
@@ -297,6 +300,56 @@ def test_build_config_sets_nested_fields_by_path_and_names_an_unknown_one() -> N
     assert config.env.world.max_yaw_rate == CollectConfig().env.world.max_yaw_rate  # the enclosing default
     with pytest.raises(ConfigError, match="no setting nothing"):
         build_config(CollectConfig, {"env.nothing": 1})
+
+
+@dataclasses.dataclass(frozen=True)
+class _Near:
+    """A toy name's config."""
+
+    reach: float = 2.0  # metres
+
+
+@dataclasses.dataclass(frozen=True)
+class _Far:
+    """Another toy name's config."""
+
+    steps: int = 3  # steps
+
+
+@dataclasses.dataclass(frozen=True)
+class _Held:
+    """A config with a keyed field: one config per name."""
+
+    seed: int = 0  # a seed
+    each: Keyed = dataclasses.field(default_factory=Keyed,
+                                    metadata=keyed(lambda: {"near": _Near, "far": _Far}))
+
+    def __post_init__(self) -> None:
+        complete_keyed(self)
+
+
+def test_a_keyed_field_holds_a_config_per_name_spelled_by_the_name() -> None:
+    """Its configs are flags, record keys and field paths by their names; each absent one at its
+    defaults; frozen and hashable; a name of no class, or a config of another's, refused."""
+    from depthq.errors import ConfigError
+    from depthq.flags import config_flags, get_path
+
+    held = _Held()
+    assert held.each == {"near": _Near(), "far": _Far()} and hash(held) == hash(_Held())
+    assert [f.path for f in config_flags(_Held)] == ["seed", "near.reach", "far.steps"]
+    built = build_config(_Held, {"far.steps": 5, "seed": 1})
+    assert built.each == {"near": _Near(), "far": _Far(steps=5)} and get_path(built, "far.steps") == 5
+    assert build_config(_Held, {"near.reach": 1.0}, built).each == {"near": _Near(1.0), "far": _Far(5)}
+    assert to_dict(built) == {"seed": 1, "near": {"reach": 2.0}, "far": {"steps": 5}}
+    assert from_dict(_Held, to_dict(built)) == built and from_dict(_Held, {"seed": 1}) == _Held(seed=1)
+    with pytest.raises(TypeError):
+        built.each["far"] = _Far()  # type: ignore[index]
+    with pytest.raises(ConfigError, match="'mid' has no settings here"):
+        _Held(each={"mid": _Near()})
+    with pytest.raises(ConfigError, match=r"each\['far'\] must be a _Far"):
+        _Held(each={"far": _Near()})
+    with pytest.raises(ConfigError, match="unknown field"):
+        from_dict(_Held, {"mid": {}})
 
 
 def test_collect_offers_only_what_changes_the_data(capsys: pytest.CaptureFixture[str]) -> None:

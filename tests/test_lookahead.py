@@ -22,11 +22,9 @@ from torch import nn
 from depthq.blocks.losses import depth_l1_loss, lookahead_l1_loss
 from depthq.control.action_selection import (
     ACTIONS,
-    Selection,
     candidate_sequences,
     depth_scores,
     pick_best,
-    sequence_scores,
 )
 from depthq.data import DataConfig
 from depthq.data.manifest import Dataset
@@ -34,7 +32,7 @@ from depthq.data.samples import bins_target, collision_target
 from depthq.data.views import FrameView, view_arrays
 from depthq.errors import ConfigError
 from depthq.flags import build_config, config_from_args
-from depthq.networks import DepthSettings, build_head, get_network
+from depthq.networks import DepthSettings, Selection, build_head, get_network
 from depthq.train.config import TrainConfig
 
 DEPTH = get_network("depth")
@@ -186,18 +184,21 @@ def test_selection_over_sequences_min_or_discounted_first_action() -> None:
     np.testing.assert_array_equal(held, [[-1, -1, -1], [0, 0, 0], [1, 1, 1]])
     switched = candidate_sequences(ACTIONS, 3, switch=True)
     assert switched.shape == (3 + 2 * 6, 3) and [1.0, 1.0, -1.0] in switched.tolist()
+    # Depth-Q-Net makes its candidates by its acting settings: held, or with `switch` switched too.
+    np.testing.assert_array_equal(DEPTH.candidates(np.asarray(ACTIONS), 3, Selection()), held)
+    np.testing.assert_array_equal(DEPTH.candidates(np.asarray(ACTIONS), 3, Selection(switch=True)), switched)
     pred = np.full((3, 3, 26), 1.5)
     pred[0, 0, 0] = 0.2  # right is close at t+1 only
     pred[1, 2, 10] = 0.4  # straight reaches a wall at t+3
     pred[2, :, 5] = 0.9  # left stays 0.9 m from something
     minimum = Selection(rule="farthest_nearest_bin")
-    np.testing.assert_allclose(sequence_scores(pred, minimum), [0.2, 0.4, 0.9])
+    np.testing.assert_allclose(DEPTH.scores(pred, minimum), [0.2, 0.4, 0.9])
     assert DEPTH.choose(pred, held, minimum) == 1.0  # the farthest minimum over the steps: left
     assert DEPTH.choose(pred[:, :1], held[:, :1], minimum) == 0.0  # one step ahead: straight
     assert Selection().rule == "discounted_nearest_bin"  # the default, chosen on val canyons
     discounted = Selection(rule="discounted_nearest_bin", discount=0.5)
     w = np.array([1, 0.5, 0.25])
-    np.testing.assert_allclose(sequence_scores(pred, discounted), [(0.2 + 0.75 + 0.375) / w.sum(),
+    np.testing.assert_allclose(DEPTH.scores(pred, discounted), [(0.2 + 0.75 + 0.375) / w.sum(),
                                                                    (1.5 + 0.75 + 0.1) / w.sum(), 0.9])
     assert DEPTH.choose(pred, held, discounted) == 0.0  # straight: the wall is far off
     with pytest.raises(ConfigError, match="got 'nearest'"):
@@ -265,11 +266,12 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     policy = QNetPolicy.from_checkpoint(out)
     frame = np.zeros((308, 410, 3), np.uint8)
     assert policy.values(frame).shape == (3, 3, 26)
-    switching = make_policy(str(out), selection=Selection(rule="discounted_nearest_bin", switch=True))
+    switching = make_policy(str(out), acting={"depth": Selection(rule="discounted_nearest_bin", switch=True)})
     assert switching.values(frame).shape == (15, 3, 26) and switching.act({"image": frame}) in ACTIONS
     from depthq.bench.policy import bench_policy
 
-    timed = bench_policy([str(out)], decisions=2, batches=0, threads=1, switch=True)["policies"][0]
+    timed = bench_policy([str(out)], decisions=2, batches=0, threads=1,
+                         acting={"depth": Selection(switch=True)})["policies"][0]
     assert timed["candidates"] == 15 and timed["ms_median"] > 0  # the largest candidate set, timed
     assert switching.last_values.shape == (3, 26)  # what Fig. 4 draws: each held action at t+1
 
@@ -300,7 +302,7 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
     path = export_onnx(out, tmp_path / "onnx")
     onnx_policy = OnnxPolicy(path)
     assert onnx_policy.lookahead == 3
-    onnx_switching = OnnxPolicy(path, selection=switching.selection)  # 15 sequences through the graph
+    onnx_switching = OnnxPolicy(path, acting={"depth": switching.acting})  # 15 sequences through the graph
     np.testing.assert_allclose(onnx_switching.values(frame), switching.values(frame), atol=1e-4)
     with Dataset.open(small_dataset).reader(Dataset.open(small_dataset).entries("val")[0]) as reader:
         frames = [reader.image(t) for t in range(0, 20, 4)]
@@ -310,13 +312,32 @@ def test_a_lookahead_checkpoint_trains_loads_drives_and_exports(small_dataset: P
 
 
 def test_evaluate_flags_choose_the_selection_rule_and_refuse_a_bad_one() -> None:
+    """Depth-Q-Net's acting settings are `--depth.rule` ... (`--rule` ..., their old flags, too), stored
+    under its name; a bad one is refused by its class, by its flag's path."""
+    from depthq.configio import from_dict, to_dict
     from depthq.evaluate.online import EvalConfig
+    from depthq.scripts.drive import add_arguments as add_drive_arguments
     from depthq.scripts.evaluate import add_arguments
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    args = parser.parse_args(["pol", "--out", "o", "--rule", "discounted_nearest_bin", "--discount", "0.8"])
-    config = config_from_args(EvalConfig, args, canyons=("val:1000",))
-    assert config.selection == Selection(rule="discounted_nearest_bin", discount=0.8, switch=False)
-    with pytest.raises(ConfigError, match=r"selection rule must be one of .*, got 'nearest'"):
-        EvalConfig(rule="nearest")
+    assert "--depth.rule {farthest_nearest_bin,discounted_nearest_bin}, --rule" in parser.format_help()
+    for given in (["--depth.rule", "farthest_nearest_bin", "--depth.discount", "0.8", "--depth.switch"],
+                  ["--rule", "farthest_nearest_bin", "--discount", "0.8", "--switch"]):
+        args = parser.parse_args(["pol", "--out", "o", *given])
+        config = config_from_args(EvalConfig, args, canyons=("val:1000",))
+        assert config.acting["depth"] == Selection(rule="farthest_nearest_bin", discount=0.8, switch=True)
+        assert to_dict(config)["depth"] == {"rule": "farthest_nearest_bin", "discount": 0.8, "switch": True}
+        assert from_dict(EvalConfig, to_dict(config)) == config and "rule" not in to_dict(config)
+    drive = argparse.ArgumentParser()
+    add_drive_arguments(drive)
+    args = drive.parse_args(["--out", "o", "--rule", "farthest_nearest_bin"])
+    acting = config_from_args(EvalConfig, args, canyons=("val:1000",)).acting
+    assert acting["depth"].rule == "farthest_nearest_bin"
+    assert EvalConfig().acting == {"depth": Selection()}  # each network's that has some, at its defaults
+    with pytest.raises(ConfigError, match=r"depth\.rule must be one of .*, got 'nearest'"):
+        build_config(EvalConfig, {"depth.rule": "nearest"})
+    with pytest.raises(ConfigError, match=r"depth\.discount must be in \(0, 1\], got 0"):
+        build_config(EvalConfig, {"depth.discount": 0})
+    with pytest.raises(ConfigError, match=r"'coll' has no settings here"):
+        EvalConfig(acting={"coll": Selection()})

@@ -21,6 +21,7 @@ from depthq.checkpoint import (
     read_config,
 )
 from depthq.configio import from_dict
+from depthq.errors import ConfigError
 from depthq.networks import DepthSettings, build_head
 from depthq.train.config import TrainConfig
 
@@ -167,3 +168,24 @@ def test_a_sweep_folder_that_recorded_the_default_budget_as_none_is_claimed(tmp_
     assert json.loads((tmp_path / "quick" / "reproduce.json").read_text())["sweep"]["epochs"] == 40
     with pytest.raises(ConfigError, match=r"epochs 40 there, 60 here"):
         _claim(tmp_path / "longer", widened(quick, train=(*quick.train, ("epochs", 60))))
+
+
+def test_a_summary_written_before_networks_owned_their_acting_settings_reads(tmp_path: Path) -> None:
+    """An evaluation's summary.json from before #56 held Depth-Q-Net's acting settings among the
+    others (its "rule", "discount" and "switch"): they read as its own, under its name."""
+    from depthq.configio import read_json, to_dict, write_json
+    from depthq.evaluate.online import recorded_config
+    from depthq.networks import Selection
+
+    old = {"canyons": ["val:1000", "val:1001"], "time_limit_s": 5.0, "seed": 3, "weights": None,
+           "decision_hz": 4.0, "lockstep": True, "rule": "farthest_nearest_bin", "discount": 0.8,
+           "switch": True}
+    write_json(tmp_path / "summary.json", {"config": old, "policy": {"policy": "DQN:depth_n3_s0"}})
+    config = recorded_config(read_json(tmp_path / "summary.json"))
+    assert config.acting["depth"] == Selection(rule="farthest_nearest_bin", discount=0.8, switch=True)
+    assert (config.canyons, config.time_limit_s, config.seed) == (("val:1000", "val:1001"), 5.0, 3)
+    today = to_dict(config)
+    assert today["depth"] == {"rule": "farthest_nearest_bin", "discount": 0.8, "switch": True}
+    assert recorded_config({"config": today}) == config  # a summary written today reads as it is
+    with pytest.raises(ConfigError, match="unknown field"):  # a misspelt setting is still refused
+        recorded_config({"config": {**old, "rules": "farthest_nearest_bin"}})

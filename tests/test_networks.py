@@ -1,6 +1,6 @@
 """A network is one registered class (`depthq.networks`): a toy third one, defined here in a few lines
-with a setting of its own, trains, drives, is measured offline, drawn and exported without any other
-module knowing of it."""
+with a training setting and an acting setting of its own, trains, drives, is measured offline, drawn
+and exported without any other module knowing of it."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from depthq.data.manifest import Dataset
 from depthq.data.samples import bins_target
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4
-from depthq.evaluate.online import drive, parse_canyon_set
+from depthq.evaluate.online import EvalConfig, drive, parse_canyon_set
 from depthq.evaluate.video import write_video
 from depthq.flags import build_config, config_from_args
 from depthq.networks import Network, ValuePlot, get_network, network_names, register_network, registry
@@ -46,12 +46,24 @@ class ClearanceSettings:
             raise ConfigError(f"clearance.reach must be > 0 m, got {self.reach!r}")
 
 
+@dataclass(frozen=True)
+class ClearanceActing:
+    """Clearance-Net's own acting settings (`--clearance.floor`)."""
+
+    floor: float = 0.0  # predicted clearances below this many metres count as none (0)
+
+    def __post_init__(self) -> None:
+        if not self.floor >= 0:
+            raise ConfigError(f"clearance.floor must be >= 0 m, got {self.floor!r}")
+
+
 class Clearance(Network[ClearanceSettings]):
     """A toy network: the clearance one step later (the nearest depth bin at t+1, from the data's bins
-    target) up to its reach, one number per action, mean squared error, the highest wins."""
+    target) up to its reach, one number per action, mean squared error, the highest wins (a clearance
+    below its floor counting as none)."""
 
     name, title, label, colour, lr = "clearance", "Clearance-Net", "CLR", "tab:green", 0.1
-    Settings, target = ClearanceSettings, bins_target
+    Settings, Acting, target = ClearanceSettings, ClearanceActing, bins_target
     metric, metric_title, loss_title = "mse", "mse", "squared error (m²)"
     rule, rule_text = "highest_clearance", "the action whose predicted clearance is highest"
     maximise, tie_tol, decisive, onnx_output = True, 1e-5, 0.01, "clearance"
@@ -72,6 +84,10 @@ class Clearance(Network[ClearanceSettings]):
             return per_sample.mean(), per_sample
 
         return mse
+
+    def scores(self, values, acting=None):
+        floor = (acting or ClearanceActing()).floor
+        return np.where(np.asarray(values, np.float64) < floor, 0.0, values)
 
 
 @pytest.fixture
@@ -119,6 +135,26 @@ def test_a_third_networks_own_setting_is_its_flag_record_and_sweep_setting(clear
                                                                for reach in ("", "_reach1.0")})
     reaches = {sweep.train_config(m, "d").settings.reach for m in sweep.models() if m.net == "clearance"}
     assert reaches == {1.0, 2.0}
+
+
+def test_a_third_networks_acting_setting_is_its_evaluate_flag_and_record(clearance: Network) -> None:
+    """Its acting setting is `--clearance.floor` on `depthq evaluate`, stored under its name in an
+    evaluation's config beside Depth-Q-Net's, checked by its own class, and what its rule acts by."""
+    from depthq.scripts.evaluate import add_arguments as add_evaluate_arguments
+
+    parser = argparse.ArgumentParser()
+    add_evaluate_arguments(parser)
+    assert "--clearance.floor FLOOR" in parser.format_help()
+    args = parser.parse_args(["pol", "--out", "o", "--clearance.floor", "1.5"])
+    config = config_from_args(EvalConfig, args, canyons=("val:1000",))
+    assert config.acting["clearance"] == ClearanceActing(floor=1.5)
+    assert config.acting["depth"] == EvalConfig().acting["depth"]  # another network's stay as they were
+    assert to_dict(config)["clearance"] == {"floor": 1.5} and from_dict(EvalConfig, to_dict(config)) == config
+    with pytest.raises(ConfigError, match=r"clearance\.floor must be >= 0 m, got -1\.0"):
+        build_config(EvalConfig, {"clearance.floor": -1.0})
+    values = np.array([1.2, 1.0, 0.4])
+    assert clearance.choose(values, np.asarray(ACTIONS)) == -1.0  # the highest clearance
+    assert clearance.choose(values, np.asarray(ACTIONS), clearance.own_acting(config.acting)) == 0.0  # none
 
 
 def test_a_packages_network_is_found_by_its_entry_point(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -189,6 +225,7 @@ def test_a_third_network_trains_drives_and_exports(
     # Driven in this process (a worker process would not know the network: `depthq.networks.registry`).
     policy = make_policy(str(folder), threads=1)
     assert policy.network is clearance and policy.name.startswith("CLR:")
+    assert policy.acting == ClearanceActing()  # its own acting settings, its defaults when none are given
     env = CanyonEnv(EnvConfig(time_limit_s=3.0))
     try:
         canyon = parse_canyon_set("val:1000")[0]
@@ -200,6 +237,10 @@ def test_a_third_network_trains_drives_and_exports(
     assert run["steps"] > 0 and set(np.asarray(run["actions"]).tolist()) <= set(ACTIONS)
     values = policy.last_values
     assert values.shape == (3,) and action == ACTIONS[int(np.argmax(values))]  # the highest wins
+    # An evaluation's acting settings reach its rule: below a floor past every clearance, all tie: straight.
+    acting = build_config(EvalConfig, {"clearance.floor": 99.0}).acting
+    floored = make_policy(str(folder), threads=1, acting=acting)
+    assert floored.acting == ClearanceActing(floor=99.0) and floored.act(obs) == 0.0
     described = policy.describe()
     write_video(run["video"], run, described, tmp_path / "video.mp4", fps=5.0)
     plot_fig4(run["snapshots"], run, described, tmp_path / "fig4.png")

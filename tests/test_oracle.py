@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from depthq.cli import main
-from depthq.control.action_selection import ACTIONS, Selection
+from depthq.control.action_selection import ACTIONS
 from depthq.errors import ConfigError
 from depthq.evaluate.online import EvalConfig, evaluate, parse_canyon_set
 from depthq.evaluate.oracle import Oracle, OracleWorld, agreement, drive_oracle, env_config
+from depthq.networks import Selection
 from depthq.sim.env import SPAWN
 from depthq.train.config import TrainConfig
 from depthq.train.trainer import train

@@ -11,7 +11,7 @@ import os
 import tempfile
 import types
 import typing
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, Literal, TypeVar
 
@@ -32,6 +32,13 @@ OMIT_DEFAULT = {"omit_default": True}
 TAGGED = "tagged"
 
 
+# Field metadata of a field holding one config per name of a registry (`keyed(classes)`), a `Keyed`
+# mapping: `EvalConfig.acting`, each registered network's own acting settings, since one evaluation
+# config serves every network a sweep drives. Records, flags and field paths spell each config by its
+# name, as a tagged one by its tag value: "depth" in summary.json, `--depth.rule` on the command line.
+KEYED = "keyed"
+
+
 def tagged(tag: str, classes: Callable[[], dict[str, type]]) -> dict[str, Any]:
     """The metadata of a tagged config field (`TAGGED`): `tag` names the field whose value chooses its
     class, `classes()` gives every value's class (called when needed: a registry may grow)."""
@@ -48,6 +55,64 @@ def tagged_field(cls: type) -> tuple[dataclasses.Field, str, dict[str, type]] | 
     return None
 
 
+def keyed(classes: Callable[[], dict[str, type]]) -> dict[str, Any]:
+    """The metadata of a keyed config field (`KEYED`): `classes()` gives each name's class (called when
+    needed: a registry may grow)."""
+    return {KEYED: classes}
+
+
+class Keyed(Mapping[str, Any]):
+    """A `KEYED` field's value: name → config, immutable and hashable as a frozen config's fields are."""
+
+    def __init__(self, items: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> None:
+        self._items = dict(items)
+
+    def __getitem__(self, name: str) -> Any:
+        return self._items[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __hash__(self) -> int:
+        return hash(tuple(self._items.items()))
+
+    def __repr__(self) -> str:
+        return f"Keyed({self._items!r})"
+
+
+def keyed_fields(cls: type) -> list[tuple[dataclasses.Field, dict[str, type]]]:
+    """The keyed config fields of dataclass `cls` (`KEYED`), each with its classes by name."""
+    return [(f, f.metadata[KEYED]()) for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+            if KEYED in f.metadata]
+
+
+def complete_keyed(config: Any) -> None:
+    """Set each keyed field of the frozen dataclass `config` (from its `__post_init__`) to a `Keyed` of
+    a config for every name, in the classes' order: the given one, else that class's defaults. A name
+    of no class, a config of another class or a name that is also a field is a ConfigError."""
+    cls = type(config)
+    names = {f.name for f in dataclasses.fields(cls)}
+    for f, classes in keyed_fields(cls):
+        given = getattr(config, f.name)
+        if not isinstance(given, Mapping):
+            raise ConfigError(f"{cls.__name__}.{f.name} must map names to configs, got {given!r}")
+        unknown = sorted(set(given) - set(classes))
+        if unknown:
+            raise ConfigError(f"{cls.__name__}: {', '.join(map(repr, unknown))} has no settings here; "
+                              f"{f.name} holds those of {sorted(classes)}")
+        for name, inner in classes.items():
+            if name in names:
+                raise ConfigError(f"{cls.__name__}: {name!r} is a field and a name of {f.name}")
+            if name in given and not isinstance(given[name], inner):
+                raise ConfigError(f"{cls.__name__}.{f.name}[{name!r}] must be a {inner.__name__}, "
+                                  f"got {given[name]!r}")
+        object.__setattr__(config, f.name, Keyed({name: given[name] if name in given else inner()
+                                                  for name, inner in classes.items()}))
+
+
 def to_dict(config: Any) -> dict[str, Any]:
     """A JSON-ready dict of a (nested) dataclass; tuples become lists; `OMIT_DEFAULT` fields at their
     default are left out (`from_dict` restores them)."""
@@ -61,12 +126,15 @@ def _as_dict(value: Any) -> Any:
             item = getattr(value, f.name)
             if f.metadata.get("omit_default") and item == field_default(f):
                 continue
+            if KEYED in f.metadata:  # each config under its name, beside the fields
+                out.update({name: _as_dict(inner) for name, inner in item.items()})
+                continue
             key = getattr(value, f.metadata[TAGGED][0]) if TAGGED in f.metadata else f.name
             out[key] = _as_dict(item)
         return out
     if isinstance(value, tuple | list):
         return [_as_dict(v) for v in value]
-    if isinstance(value, dict):
+    if isinstance(value, Mapping):
         return {k: _as_dict(v) for k, v in value.items()}
     return value
 
@@ -96,7 +164,7 @@ def tag_default(cls: type, tag: str) -> Any:
 
 def from_dict(cls: type[T], data: dict[str, Any]) -> T:
     """Build `cls` from a dict, recursing into nested dataclasses (a tagged one under its tag's value,
-    `TAGGED`); unknown keys are an error."""
+    `TAGGED`; a keyed field's under their names, `KEYED`); unknown keys are an error."""
     if not isinstance(data, dict):
         raise ConfigError(f"{cls.__name__}: expected a JSON object, got {data!r}")
     hints = typing.get_type_hints(cls)
@@ -112,6 +180,11 @@ def from_dict(cls: type[T], data: dict[str, Any]) -> T:
                 raise ConfigError(f"{cls.__name__}: {tag} {chosen!r} has no settings of its own")
             kwargs[f.name] = from_dict(classes[chosen], data[chosen])
             data = {k: v for k, v in data.items() if k != chosen}
+    for f, classes in keyed_fields(cls):
+        names.discard(f.name)
+        kwargs[f.name] = Keyed({name: from_dict(inner, data[name]) for name, inner in classes.items()
+                                if name in data})
+        data = {k: v for k, v in data.items() if k not in classes}
     unknown = sorted(set(data) - names)
     if unknown:
         raise ConfigError(f"{cls.__name__}: unknown field(s) {unknown}")

@@ -5,11 +5,12 @@ becomes `--field-name` (`--field_name` is accepted too); a field that is itself 
 becomes one flag per field of its own, dotted, recursively (the way tyro spells them):
 `TrainConfig.samples.horizon` is `--samples.horizon`, `CollectConfig.env.world.decision_hz` is
 `--env.world.decision-hz`; a tagged config (`depthq.configio.TAGGED`) is spelled by its tag's value,
-one group per value: `TrainConfig.settings` of Depth-Q-Net is `--depth.lookahead`. Type, default and
-help come from the classes: the help from the comment above or beside the field, else from a
-docstring sentence that starts with the field's name in backticks; a nested field's default is its
-enclosing config's (CollectConfig's env is `exploration_env()`, not a bare `EnvConfig()`). A field
-added to a class is a flag with no edit here.
+one group per value: `TrainConfig.settings` of Depth-Q-Net is `--depth.lookahead`; a keyed field's
+configs (`depthq.configio.KEYED`) by their names: `EvalConfig.acting` of Depth-Q-Net is
+`--depth.rule`. Type, default and help come from the classes: the help from the comment above or
+beside the field, else from a docstring sentence that starts with the field's name in backticks; a
+nested field's default is its enclosing config's (CollectConfig's env is `exploration_env()`, not a
+bare `EnvConfig()`). A field added to a class is a flag with no edit here.
 
 A flag not given is not set: `config_from_args` builds the config from the flags given and leaves
 every other field at its default (or at the `base` config a verb passes), so what --help shows as a
@@ -32,7 +33,16 @@ import types
 import typing
 from typing import Any, Literal, TypeVar
 
-from depthq.configio import TAGGED, choices, field_default, tag_default, tagged_field
+from depthq.configio import (
+    KEYED,
+    TAGGED,
+    Keyed,
+    choices,
+    field_default,
+    keyed_fields,
+    tag_default,
+    tagged_field,
+)
 from depthq.errors import ConfigError
 
 T = TypeVar("T")
@@ -73,9 +83,9 @@ def flag_name(path: str) -> str:
 
 def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]:
     """The flags of `cls`, nested configs' fields recursively; a tagged config's (`TAGGED`) for each of
-    its classes, or for `default`'s alone. `default`: an instance whose values are the defaults (None:
-    the fields' own). A type no flag can spell is an error here, when the parser is built, rather
-    than a field silently left out."""
+    its classes, or for `default`'s alone; a keyed field's (`KEYED`) for each of its names. `default`:
+    an instance whose values are the defaults (None: the fields' own). A type no flag can spell is an
+    error here, when the parser is built, rather than a field silently left out."""
     hints = typing.get_type_hints(cls)
     docs = field_help(cls)
     out = []
@@ -88,6 +98,11 @@ def config_flags(cls: type, default: Any = None, prefix: str = "") -> list[Flag]
             chosen = classes() if default is None else {getattr(default, tag): type(value)}
             for name, inner in chosen.items():
                 out += config_flags(inner, value if default is not None else None, f"{prefix}{name}.")
+            continue
+        if KEYED in f.metadata:
+            for name, inner in f.metadata[KEYED]().items():
+                given = value.get(name) if default is not None else None
+                out += config_flags(inner, given, f"{prefix}{name}.")
             continue
         hint = hints[f.name]
         if dataclasses.is_dataclass(hint):
@@ -172,9 +187,10 @@ def config_from_args(cls: type[T], args: argparse.Namespace, base: T | None = No
 
 def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) -> T:
     """`cls` with the fields at the paths of `values` set ('samples.horizon' sets a field of the
-    nested config `samples`; 'depth.lookahead' one of the tagged config of tag value "depth"), every
-    other field from `base`, else at its default; an unknown path, or one of another tag value than
-    the config's, is a ConfigError naming it."""
+    nested config `samples`; 'depth.lookahead' one of the tagged config of tag value "depth", and
+    'depth.rule' one of a keyed field's config of that name), every other field from `base`, else at
+    its default; an unknown path, or one of another tag value than the config's, is a ConfigError
+    naming it."""
     own: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {}
     for path, value in values.items():
@@ -185,6 +201,7 @@ def build_config(cls: type[T], values: dict[str, Any], base: T | None = None) ->
             own[name] = value
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     _build_tagged(cls, own, nested, base)
+    _build_keyed(cls, own, nested, base)
     unknown = sorted((set(own) | set(nested)) - set(fields))
     if unknown:
         raise ConfigError(f"{cls.__name__} has no setting {', '.join(unknown)}")
@@ -224,13 +241,31 @@ def _build_tagged(cls: type, own: dict[str, Any], nested: dict[str, dict[str, An
         own[f.name] = None  # another tag value: its class's defaults
 
 
+def _build_keyed(cls: type, own: dict[str, Any], nested: dict[str, dict[str, Any]], base: Any) -> None:
+    """Into `own`: each keyed field of `cls` (`KEYED`), its configs of the names `nested` holds settings
+    of (taken out of `nested`) built on `base`'s, the others as they were (the class completes them)."""
+    for f, classes in keyed_fields(cls):
+        names = [name for name in nested if name in classes]
+        if not names:
+            continue
+        held = own.get(f.name, getattr(base, f.name) if base is not None else Keyed())
+        own[f.name] = Keyed({**held, **{name: build_config(classes[name], nested.pop(name), held.get(name))
+                                        for name in names}})
+
+
 def get_path(config: Any, path: str) -> Any:
     """The value of a field path: get_path(train_config, 'samples.horizon'); a tagged config's by its
-    tag value: get_path(train_config, 'depth.lookahead')."""
+    tag value: get_path(train_config, 'depth.lookahead'); a keyed field's by its name:
+    get_path(eval_config, 'depth.rule')."""
     for name in path.split("."):
-        found = tagged_field(type(config)) if dataclasses.is_dataclass(config) else None
-        if found is not None and name == getattr(config, found[1]) and not hasattr(config, name):
-            config = getattr(config, found[0].name)
+        if dataclasses.is_dataclass(config) and not hasattr(config, name):
+            found = tagged_field(type(config))
+            if found is not None and name == getattr(config, found[1]):
+                config = getattr(config, found[0].name)
+                continue
+            held = [getattr(config, f.name) for f, _ in keyed_fields(type(config))]
+            owner = next((configs for configs in held if name in configs), None)
+            config = owner[name] if owner is not None else getattr(config, name)
         else:
             config = getattr(config, name)
     return config

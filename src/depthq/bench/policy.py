@@ -4,6 +4,8 @@ a batch of frames in one call, as lock-step evaluation decides for 20 canyons (d
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
@@ -11,7 +13,6 @@ import torch
 from depthq.blocks.device import resolve_device
 from depthq.blocks.heads import QNet
 from depthq.blocks.trunk import build_trunk
-from depthq.control.action_selection import Selection
 from depthq.control.policy import BatchPolicy
 from depthq.networks import DepthQNet, build_head
 from depthq.parallel import cores
@@ -30,15 +31,15 @@ def bench_policy(
     device: str = "auto",
     batches: int | None = None,
     threads: int | None = None,
-    switch: bool = False,
+    acting: Mapping[str, Any] | None = None,
 ) -> dict:
     """Median and 90th-percentile ms per decision on real rendered frames, for each policy in `specs`
     (checkpoint folders or 'onnx:PATH'), taken in turns on the same frames so they compare fairly;
     then, for a `BatchPolicy`, `batches` calls of `act_batch` on BATCH frames (None: as many decisions
     as `decisions`, at least one call): ms per call and per decision in it. `threads`: torch's and an
     ONNX session's (None: this process's cores, onnxruntime's default; an evaluation worker has one).
-    `switch`: a lookahead Depth-Q-Net also scores the sequences that switch action once, its largest
-    candidate set.
+    `acting`: the policies' acting settings by network name (`EvalConfig.acting`; None: the
+    defaults), e.g. a lookahead Depth-Q-Net's `switch`, its largest candidate set.
 
     Without `specs` the policy gets a freshly initialised Depth-Q-Net head: the latency does not
     depend on the weights, only on the trunk and the head's shape.
@@ -47,8 +48,7 @@ def bench_policy(
     torch.set_num_threads(threads or cores())
     batches = max(1, decisions // BATCH) if batches is None else batches
     if specs:
-        selection = Selection(switch=switch)
-        policies = [make_policy(spec, device=where, selection=selection, threads=threads) for spec in specs]
+        policies = [make_policy(spec, device=where, acting=acting, threads=threads) for spec in specs]
     else:
         policies = [untrained_depth_policy(where)]
     env = CanyonEnv()

@@ -10,8 +10,10 @@ sweeps named model folders after them (docs/formats.md).
                     own settings under its name (`own_settings`)
     sweep_setup     a sweep folder's reproduce.json written before sweeps ("preset") or before a
                     setting was part of a sweep's setup (`family`)
-    RENAMED_SETTINGS, FOLDER_KEYS
-                    settings by the names they had: their old flags (--select, --horizon), sweep
+    summary_config  an evaluation's config (summary.json) written before networks owned their acting
+                    settings: Depth-Q-Net's under its name
+    RENAMED_SETTINGS, FOLDER_KEYS, RENAMED_EVAL_SETTINGS
+                    settings by the names they had: their old flags (--select, --horizon, --rule), sweep
                     settings (--set select=final) and the model folders named after them
                     (depth_n200_s0_selectfinal) still take them
 
@@ -72,6 +74,11 @@ RENAMED_SETTINGS = {"select": "weights", **{name: f"samples.{name}" for name in 
 # `--set select=final` was; `--set samples.horizon=2` is coll_n200_s0_horizon2; `--set
 # depth.lookahead=3` is depth_n200_s0_lookahead3).
 FOLDER_KEYS = {new: old for old, new in RENAMED_SETTINGS.items()}
+# Depth-Q-Net's acting settings (`depthq.networks.depth_q_net.Selection`), which an evaluation's config
+# held among the others until #56 gave each network its own, under its name (`EvalConfig.acting`); by
+# their old names (old → today's path) as `depthq evaluate` and `depthq drive` still take them.
+_DEPTH_ACTING = ("rule", "discount", "switch")
+RENAMED_EVAL_SETTINGS = {name: f"{_DEPTH}.{name}" for name in _DEPTH_ACTING}
 # What a sweep folder written before a setting was part of a sweep's setup holds for it.
 _SETUP_ADDED = {"family": PAPER}
 # A setup setting a sweep folder recorded as none, "the trainer's default", before presets named it
@@ -169,3 +176,14 @@ def sweep_setup(record: dict[str, Any]) -> dict[str, Any]:
     (`_SETUP_ADDED`) or recorded as none (`_SETUP_UNSET`) at the one value there was."""
     setup = {**_SETUP_ADDED, **record.get("sweep", record.get("preset", {}))}
     return {**setup, **{k: v for k, v in _SETUP_UNSET.items() if setup.get(k) is None}}
+
+
+def summary_config(config: dict[str, Any]) -> dict[str, Any]:
+    """An evaluation's config, as its summary.json records it (`depthq.evaluate.online.EvalConfig`), in
+    today's shape: one written before #56 held Depth-Q-Net's acting settings among the others
+    (`_DEPTH_ACTING`), now under its name. A config written today is returned as it is."""
+    flat = {name: config[name] for name in _DEPTH_ACTING if name in config}
+    if not flat:
+        return config
+    out = {k: v for k, v in config.items() if k not in _DEPTH_ACTING}
+    return {**out, _DEPTH: {**flat, **out.get(_DEPTH, {})}}

@@ -8,21 +8,18 @@ action with the lowest. Ties (within the caller's tolerance, `pick_best`) go str
 among the best, otherwise to the first tied candidate.
 
 A Depth-Q-Net that looks K steps ahead (docs/design.md#lookahead-selection) scores candidate action
-sequences (N, K), all in one head pass: each action held for K steps, and with `Selection.switch`
-also each that switches to another action after k steps. A sequence's score is the nearest bin of
-each step, combined over the steps by the rule: its discounted mean (`discounted_nearest_bin`, the
-default, chosen on val canyons: docs/design.md#lookahead-selection) or its minimum
-(`farthest_nearest_bin`); at K = 1 both are the rule above. The first action of the best sequence is
+sequences (N, K), all in one head pass: each action held for K steps, and with its acting setting
+`switch` (`depthq.networks.depth_q_net.Selection`) also each that switches to another action after k
+steps. A sequence's score is the nearest bin of each step, combined over the steps by the rule: its
+discounted mean (`discounted_nearest_bin`, the default, chosen on val canyons:
+docs/design.md#lookahead-selection) or its minimum (`farthest_nearest_bin`); at K = 1 both are the
+rule above. The first action of the best sequence is
 executed; ties go to the first tied sequence that starts straight, else the first.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
-
-from depthq.errors import ConfigError
 
 ACTIONS = (-1.0, 0.0, 1.0)  # the candidate actions a Q-net policy scores per frame
 # The rules by name, as a checkpoint records them, and in words, as an exported graph carries them.
@@ -38,30 +35,6 @@ RULES = {
     "if straight is tied, else to the first",
 }
 DEPTH_RULES = ("farthest_nearest_bin", "discounted_nearest_bin")
-
-
-@dataclass(frozen=True)
-class Selection:
-    """How a Depth-Q-Net policy makes and scores its candidates (a policy setting, not a training one).
-
-    `rule`: one of DEPTH_RULES; `discount`: the step weight's base of `discounted_nearest_bin`;
-    `switch`: also sequences that switch action once. Off by default: the policy re-plans every frame,
-    so holding is what it commits to, and OU exploration (a step-to-step correlation of 0.95) rarely
-    reverses within K frames, so switched sequences are predicted from few training examples.
-    """
-
-    rule: str = "discounted_nearest_bin"  # chosen on val canyons (docs/design.md#lookahead-selection)
-    discount: float = 0.9
-    switch: bool = False
-
-    def __post_init__(self) -> None:
-        if self.rule not in DEPTH_RULES:
-            raise ConfigError(f"selection rule must be one of {DEPTH_RULES}, got {self.rule!r}")
-        d = self.discount
-        if isinstance(d, bool) or not isinstance(d, int | float) or not 0 < d <= 1:
-            raise ConfigError(f"selection discount must be in (0, 1], got {d!r}")
-        if not isinstance(self.switch, bool):
-            raise ConfigError(f"selection switch must be true or false, got {self.switch!r}")
 
 
 def candidate_sequences(
@@ -86,15 +59,15 @@ def depth_scores(pred_bins: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(nearest), nearest, 0.0)
 
 
-def sequence_scores(pred_bins: np.ndarray, selection: Selection | None = None) -> np.ndarray:
+def sequence_scores(pred_bins: np.ndarray, rule: str, discount: float) -> np.ndarray:
     """(N, K, n_bins) predicted depths of N candidate sequences (or (N, n_bins): one step) → (N,)
-    scores by `selection`'s rule (docs/design.md#lookahead-selection); at K = 1 `depth_scores`."""
-    selection = selection or Selection()
+    scores by `rule`, one of DEPTH_RULES, and its step weight's base `discount`
+    (docs/design.md#lookahead-selection); at K = 1 `depth_scores`."""
     pred = np.asarray(pred_bins, dtype=np.float64)
     nearest = depth_scores(pred.reshape(-1, pred.shape[-1])).reshape(pred.shape[0], -1)  # (N, K)
-    if selection.rule == "farthest_nearest_bin":
+    if rule == "farthest_nearest_bin":
         return nearest.min(axis=1)
-    weights = selection.discount ** np.arange(nearest.shape[1])
+    weights = discount ** np.arange(nearest.shape[1])
     return (nearest * weights).sum(axis=1) / weights.sum()
 
 

@@ -1,19 +1,31 @@
 """What the two learned policies of `depthq.policies` share (a checkpoint's `QNetPolicy`, an exported
-graph's `OnnxPolicy`): the candidates a frame's values are predicted for, the rule that picks one of them
-(docs/design.md#action-selection, #lookahead-selection), and what Fig. 4 is shown of the values.
+graph's `OnnxPolicy`): the candidates a frame's values are predicted for and the rule that picks one of
+them, both its network's, by its acting settings (`Network.Acting`; docs/design.md#action-selection,
+#lookahead-selection), and what Fig. 4 is shown of the values.
 A subclass only predicts: `values(image)` for one frame.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
 from depthq.configio import to_dict
-from depthq.control.action_selection import Selection, candidate_sequences
 from depthq.control.policy import Observation
+
+
+class ActingNetwork(Protocol):
+    """What a greedy policy asks its network (`depthq.networks.Network`, a layer above this one)."""
+
+    name: str
+
+    def own_acting(self, acting: Mapping[str, Any] | None) -> Any: ...
+
+    def candidates(self, actions: np.ndarray, lookahead: int, acting: Any) -> np.ndarray: ...
+
+    def choose(self, values: np.ndarray, candidates: np.ndarray, acting: Any = None) -> float: ...
 
 
 class GreedyPolicy:
@@ -22,19 +34,19 @@ class GreedyPolicy:
     net's first step of each action held) or (N,) collision probabilities."""
 
     def _set_candidates(
-        self, kind: str, rule: Callable[[np.ndarray, np.ndarray, Selection], float],
-        actions: Sequence[float] | np.ndarray, lookahead: int, selection: Selection | None,
+        self, network: ActingNetwork, actions: Sequence[float] | np.ndarray, lookahead: int,
+        acting: Mapping[str, Any] | None,
     ) -> None:
-        """`kind`: the network's name; `rule`: (values, candidates, selection) → the action (its
-        network's `choose`)."""
-        self.kind = kind
-        self._rule = rule
+        """`network`: its network, whose `choose` picks the action; `acting`: an evaluation's acting
+        settings by network name (`EvalConfig.acting`; None: the defaults), of which `network`'s own
+        are used (`self.acting`)."""
+        self.network = network
+        self.kind = network.name
         self.actions = np.asarray(actions, np.float64)
         self.lookahead = lookahead
-        self.selection = selection or Selection()
+        self.acting = network.own_acting(acting)
         # The candidates scored per frame: the actions, or a lookahead net's sequences (N, K).
-        self.candidates = (self.actions if lookahead == 1
-                           else candidate_sequences(self.actions, lookahead, self.selection.switch))
+        self.candidates = network.candidates(self.actions, lookahead, self.acting)
         self.last_values: np.ndarray | None = None
         self.last_batch_values: list[np.ndarray] | None = None
 
@@ -47,7 +59,7 @@ class GreedyPolicy:
 
     def choose(self, values: np.ndarray) -> float:
         """The action one frame's `values` select (every path that acts calls this)."""
-        return self._rule(values, self.candidates, self.selection)
+        return self.network.choose(values, self.candidates, self.acting)
 
     def shown(self, values: np.ndarray) -> np.ndarray:
         """What `last_values` keeps of one frame's `values`: per action, its prediction at t+1."""
@@ -73,4 +85,4 @@ class GreedyPolicy:
         selects."""
         if self.lookahead == 1:
             return {}
-        return {"lookahead": self.lookahead, "selection": to_dict(self.selection)}
+        return {"lookahead": self.lookahead, "selection": to_dict(self.acting)}

@@ -14,12 +14,13 @@ import time
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 
 from depthq.blocks.device import resolve_device
+from depthq.blocks.migrations import summary_config
 from depthq.checkpoint import (
     CONFIG,
     chosen_weights,
@@ -30,14 +31,17 @@ from depthq.checkpoint import (
 )
 from depthq.configio import (
     OMIT_DEFAULT,
+    Keyed,
     atomic_write_bytes,
     check_seed,
+    complete_keyed,
+    from_dict,
+    keyed,
     provenance,
     read_json,
     to_dict,
     write_json,
 )
-from depthq.control.action_selection import DEPTH_RULES, Selection
 from depthq.control.heuristic import DepthHeuristic
 from depthq.errors import ConfigError
 from depthq.evaluate.figures import plot_fig4, plot_trajectories
@@ -46,6 +50,7 @@ from depthq.evaluate.metrics import summarize
 from depthq.evaluate.run_record import FIG4_EVERY, RunRecord
 from depthq.evaluate.video import write_video
 from depthq.host import host_fingerprint
+from depthq.networks import acting_classes
 from depthq.parallel import LOCAL, Executor
 from depthq.policies.onnx import OnnxPolicy
 from depthq.policies.registry import make_policy
@@ -100,14 +105,10 @@ class EvalConfig:
     # Drive each worker's canyons together, one batched decision per step (docs/design.md#lockstep):
     # the runs of --no-lockstep, which drives them one after the other.
     lockstep: bool = True
-    # How a lookahead Depth-Q-Net scores its candidate sequences: discounted_nearest_bin or
-    # farthest_nearest_bin (docs/design.md#lookahead-selection). A one-step net's choice is the same
-    # under each rule.
-    rule: Literal[DEPTH_RULES] = "discounted_nearest_bin"  # type: ignore[valid-type]
-    # The step weight's base of discounted_nearest_bin.
-    discount: float = 0.9
-    # A lookahead Depth-Q-Net also scores sequences that switch action once.
-    switch: bool = False
+    # Each network's own acting settings (`Network.Acting`), by its name: the evaluated policy's network
+    # acts by its own (`--depth.rule`, ..., stored under its name in a summary), one without any by its
+    # rule alone.
+    acting: Keyed = field(default_factory=Keyed, metadata=keyed(acting_classes))
     # How the canyons look: flat, colours, textured, heldout, broad or a folder of images
     # (docs/design.md#looks); none: the family's own. Any policy drives in any look.
     look: str | None = field(default=None, metadata=OMIT_DEFAULT)
@@ -127,11 +128,7 @@ class EvalConfig:
             raise ConfigError(f"--time-limit must be > 0, got {self.time_limit_s}")
         if self.weights is not None:
             weights_stem(self.weights)
-        _ = self.selection  # checks rule, discount and switch
-
-    @property
-    def selection(self) -> Selection:
-        return Selection(rule=self.rule, discount=self.discount, switch=self.switch)
+        complete_keyed(self)  # every network's acting settings, each checked by its own class
 
     @property
     def family(self) -> str:
@@ -242,7 +239,7 @@ class _EvalWorker:
         self.config, self.video = config, video
         self.make_policy = partial(
             make_policy, policy_spec, seed=config.seed, weights=config.weights, device=device,
-            selection=config.selection, threads=1,  # an ONNX session's, for the same reasons
+            acting=config.acting, threads=1,  # an ONNX session's, for the same reasons
         )
         self.policy = self.make_policy()
         self.envs, self.expert = [CanyonEnv(config.env)], DepthHeuristic()
@@ -328,7 +325,7 @@ def evaluate(
     where = str(resolve_device(device))
     policy_spec = PolicySpec.parse(policy_spec)  # a bad spec fails here, before any worker starts
     description = make_policy(
-        policy_spec, seed=config.seed, weights=config.weights, device=where, selection=config.selection
+        policy_spec, seed=config.seed, weights=config.weights, device=where, acting=config.acting
     ).describe()
     dataset = None  # a checkpoint's, for its offline metrics: found (or refused) before any drive
     if policy_spec.checkpoint is not None:  # which every worker loads: the same path on every node
@@ -361,6 +358,12 @@ def evaluate(
     }
     _write(out, summary, ordered, video_fps=config.env.world.decision_hz)
     return summary
+
+
+def recorded_config(summary: dict[str, Any]) -> EvalConfig:
+    """The config a summary (summary.json) records, one written by an older depthq read as today's
+    (`depthq.blocks.migrations.summary_config`)."""
+    return from_dict(EvalConfig, summary_config(summary["config"]))
 
 
 def evaluation_done(folder: Path) -> bool:

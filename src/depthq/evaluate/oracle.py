@@ -5,8 +5,8 @@ An `Oracle` is a perfect predictor of a network's training signal, turned into a
 network's rule (`Network.true_scores`, `Network.choose`):
 
 - `depth`, lookahead K: the noise-free depth bins 1 … K frames ahead of each candidate action held
-  (K = 1: Depth-Q-Net's target), scored by the selection rule (`Selection`: the farthest nearest bin;
-  for K > 1 its steps combined by the discounted mean or the minimum);
+  (K = 1: Depth-Q-Net's target), scored by its selection rule (its acting settings, `Selection`: the
+  farthest nearest bin; for K > 1 its steps combined by the discounted mean or the minimum);
 - `coll`, lookahead K: whether holding the action bumps within K frames (Coll-Q-Net's target at
   horizon K), the lowest wins; ties go straight, as the networks' rule.
 
@@ -21,16 +21,18 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, fields, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from depthq.control.action_selection import ACTIONS, Selection, pick_best
+from depthq.control.action_selection import ACTIONS, pick_best
 from depthq.errors import ConfigError
 from depthq.evaluate.metrics import SUCCESS_DISTANCE
+from depthq.evaluate.online import recorded_config
+from depthq.flags import build_config
 from depthq.networks import DepthQNet, Network, get_network, network_names
 from depthq.sim.canyon import FAMILIES, Canyon, CanyonId, nearest_on_polyline
 from depthq.sim.env import COLLISIONS, CanyonEnv, EnvConfig
@@ -43,11 +45,12 @@ BEFORE_COLLISION_S = 2.0  # "the last seconds before a collision"
 @dataclass(frozen=True)
 class Oracle:
     """A perfect predictor of the network `signal` names ("depth" or "coll") `lookahead` frames ahead,
-    with the rule that picks an action from it (`selection`: a depth oracle's, for K > 1)."""
+    with the rule that picks an action from it, by that network's acting settings (`acting`, a
+    `Network.Acting`; None: its defaults)."""
 
     signal: str = DepthQNet.name
     lookahead: int = 1
-    selection: Selection = field(default_factory=Selection)
+    acting: Any = None
 
     def __post_init__(self) -> None:
         if self.signal not in network_names():
@@ -55,19 +58,29 @@ class Oracle:
         k = self.lookahead
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ConfigError(f"oracle lookahead must be an integer >= 1, got {k!r}")
+        own = self.network.Acting
+        if self.acting is None:
+            object.__setattr__(self, "acting", own())
+        elif not isinstance(self.acting, own):
+            raise ConfigError(f"oracle {self.signal}: its acting settings are a {own.__name__}, got "
+                              f"{self.acting!r}")
 
     @classmethod
     def parse(cls, text: str) -> Oracle:
-        """'depth', 'depth:3', 'depth:3:farthest_nearest_bin' or 'coll:5' (lookahead 1 if not given)."""
+        """'depth', 'depth:3', 'depth:3:farthest_nearest_bin' or 'coll:5' (lookahead 1 if not given): a
+        rule, the third, is its network's acting setting `rule` (Depth-Q-Net's `Selection.rule`)."""
         signal, _, rest = text.partition(":")
         lookahead, _, rule = rest.partition(":")
         try:
             k = int(lookahead) if lookahead else 1
         except ValueError:
             raise ConfigError(f"oracle {text!r}: lookahead must be an integer, e.g. depth:3") from None
-        if rule and not (signal in network_names() and get_network(signal).uses_selection):
-            raise ConfigError(f"oracle {text!r}: only a depth oracle takes a rule")
-        return cls(signal, k, Selection(rule) if rule else Selection())
+        if not rule:
+            return cls(signal, k)
+        acting = get_network(signal).Acting if signal in network_names() else None
+        if acting is None or "rule" not in {f.name for f in fields(acting)}:
+            raise ConfigError(f"oracle {text!r}: only the oracle of a network with a rule setting takes one")
+        return cls(signal, k, build_config(acting, {"rule": rule}))
 
     @cached_property
     def network(self) -> Network:
@@ -76,15 +89,15 @@ class Oracle:
 
     def score(self, bins: np.ndarray, bumped: np.ndarray) -> np.ndarray:
         """Each candidate's score from its true bins (N, K, bins) and bump flags (N,)."""
-        return self.network.true_scores(bins, bumped, self.selection)
+        return self.network.true_scores(bins, bumped, self.acting)
 
     def pick(self, scores: np.ndarray) -> float:
         """The action its rule takes: the best score (depth: highest; coll: lowest), ties straight."""
         return pick_best(scores, np.array(ACTIONS), self.network.maximise, self.network.tie_tol)
 
     def __str__(self) -> str:
-        rule = f":{self.selection.rule}" if self.network.uses_selection and self.lookahead > 1 else ""
-        return f"{self.signal}:{self.lookahead}{rule}"
+        rule = getattr(self.acting, "rule", None)
+        return f"{self.signal}:{self.lookahead}{f':{rule}' if rule and self.lookahead > 1 else ''}"
 
 
 class OracleWorld:
@@ -181,17 +194,15 @@ def drive_oracle(oracle: Oracle, canyons: list[str], decision_hz: float) -> dict
 
 
 def _checkpoint_policy(summary: dict[str, Any]) -> Any:
-    """The evaluated checkpoint's policy with the evaluation's weights and selection rule."""
+    """The evaluated checkpoint's policy with the evaluation's weights and acting settings."""
     from depthq.policies.qnet import QNetPolicy
 
-    described, config = summary["policy"], summary["config"]
+    described, config = summary["policy"], recorded_config(summary)
     if not described.get("checkpoint"):
         raise ConfigError(f"predictions need a checkpoint's evaluation; {described.get('policy')!r} is none")
-    selection = Selection(config.get("rule", "discounted_nearest_bin"), config.get("discount", 0.9),
-                          config.get("switch", False))
     # the evaluation's own request ('epoch:40'); without one, the weights the policy chose ('best', 'last')
-    weights = config.get("weights") or described.get("weights")
-    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), weights=weights, selection=selection)
+    weights = config.weights or described.get("weights")
+    return QNetPolicy.from_checkpoint(Path(described["checkpoint"]), weights=weights, acting=config.acting)
 
 
 def _obstacle_kind(canyon: Canyon, xy: np.ndarray) -> str:
@@ -250,7 +261,7 @@ def agreement(
                 if policy is not None:
                     values = policy.values(sim.frame(pose, seed=t))
                     rows["predicted"].append(values)
-                    rows["predicted_scores"].append(policy.network.scores(values, policy.selection))
+                    rows["predicted_scores"].append(policy.network.scores(values, policy.acting))
                 rows["true_bins"].append(true_bins)
                 taken = int(np.abs(candidates - action).argmin())
                 best = scores.max() if oracle.network.maximise else scores.min()
@@ -306,7 +317,7 @@ def _prediction_summary(
     # The policy's own rule picks: a Depth-Q-Net the highest score, a Coll-Q-Net the lowest probability.
     choice = np.array(ACTIONS)[predicted.argmax(1) if network.maximise else predicted.argmin(1)]
     out: dict[str, Any] = {"same_decision_new_noise": float((choice == recorded).mean())}
-    same = network.name == oracle.signal and network.uses_selection
+    same = network.name == oracle.signal and network.comparable_scores
     if same and predicted.shape == arrays["scores"].shape:
         error, truth = np.abs(predicted - arrays["scores"]), arrays["scores"]
         for name, mask in (("", np.ones_like(late)), ("_before_collision", late)):

@@ -10,7 +10,7 @@ import torch
 
 from depthq.blocks.heads import CollHead, Head, HeadConfig, probability
 from depthq.blocks.losses import LossFn, coll_bce_loss
-from depthq.control.action_selection import RULES, Selection
+from depthq.control.action_selection import RULES
 from depthq.data.samples import collision_target
 from depthq.errors import ConfigError
 from depthq.networks.network import Network, NoSettings, ValuePlot
@@ -69,5 +69,5 @@ class CollQNet(Network[NoSettings]):
         depend on how many frames were decided together)."""
         return torch.stack([probability(logits) for logits in raw])
 
-    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, selection: Selection) -> np.ndarray:
+    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, acting: NoSettings) -> np.ndarray:
         return bumped.astype(np.float64)

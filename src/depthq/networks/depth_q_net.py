@@ -1,7 +1,7 @@
 """Depth-Q-Net (docs/design.md#heads): predicts, for each candidate action, the depth bins one step
 later (or K steps: docs/design.md#lookahead), and acts on the action whose nearest predicted obstacle
 is farthest (docs/design.md#action-selection). Its own training settings are `DepthSettings`
-(`--depth.lookahead`, ...)."""
+(`--depth.lookahead`, ...), its acting settings `Selection` (`--depth.rule`, ...)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from depthq.blocks.heads import BIN_GRADIENTS, HEAD_FORMS, DepthFirstHead, Depth
 from depthq.blocks.losses import DEPTH_LOSSES, LossFn, depth_l1_loss, lookahead_l1_loss
 from depthq.blocks.trunk import TRUNKS
 from depthq.configio import OMIT_DEFAULT, check_choices
-from depthq.control.action_selection import RULES, Selection, sequence_scores
+from depthq.control.action_selection import DEPTH_RULES, RULES, candidate_sequences, sequence_scores
 from depthq.data.manifest import Dataset
 from depthq.data.samples import bins_target
 from depthq.data.views import view_arrays
@@ -30,6 +30,7 @@ DEFAULT_FORM = "depth_first"
 DepthLoss = Literal[DEPTH_LOSSES]  # type: ignore[valid-type]
 HeadForm = Literal[HEAD_FORMS]  # type: ignore[valid-type]
 BinGradient = Literal[BIN_GRADIENTS]  # type: ignore[valid-type]
+DepthRule = Literal[DEPTH_RULES]  # type: ignore[valid-type]
 
 
 @dataclass(frozen=True)
@@ -96,6 +97,33 @@ class DepthSettings:
         return tuple(float(self.lookahead_discount) ** k for k in range(self.lookahead))
 
 
+@dataclass(frozen=True)
+class Selection:
+    """Depth-Q-Net's own acting settings (`Network.Acting`): how its policy makes and scores its
+    candidates, an evaluation's settings, not a training's.
+
+    Switched sequences are off by default: the policy re-plans every frame, so holding is what it
+    commits to, and OU exploration (a step-to-step correlation of 0.95) rarely reverses within K
+    frames, so switched sequences are predicted from few training examples."""
+
+    # How a lookahead Depth-Q-Net scores its candidate sequences: discounted_nearest_bin or
+    # farthest_nearest_bin (docs/design.md#lookahead-selection). A one-step net's choice is the same
+    # under each rule.
+    rule: DepthRule = "discounted_nearest_bin"
+    # The step weight's base of discounted_nearest_bin.
+    discount: float = 0.9
+    # A lookahead Depth-Q-Net also scores sequences that switch action once.
+    switch: bool = False
+
+    def __post_init__(self) -> None:
+        check_choices(self, "depth")  # rule
+        d = self.discount
+        if isinstance(d, bool) or not isinstance(d, int | float) or not 0 < d <= 1:
+            raise ConfigError(f"depth.discount must be in (0, 1], got {d!r}")
+        if not isinstance(self.switch, bool):
+            raise ConfigError(f"depth.switch must be true or false, got {self.switch!r}")
+
+
 @register_network
 class DepthQNet(Network[DepthSettings]):
     name = "depth"
@@ -104,6 +132,7 @@ class DepthQNet(Network[DepthSettings]):
     colour = "tab:blue"
     lr = 0.1  # the original's (docs/design.md#training)
     Settings = DepthSettings
+    Acting = Selection
     target = bins_target
     outputs_bins = True
     metric = "abs_diff"
@@ -115,7 +144,7 @@ class DepthQNet(Network[DepthSettings]):
     # Depth-Q-Net's metres below 10 carry up to ~5e-6 of the last-bit noise a batch's sums add
     # (docs/design.md#lockstep), hence 1e-5: a tie stays one whichever kernel computed the scores.
     tie_tol = 1e-5
-    uses_selection = True
+    comparable_scores = True
     decisive = 0.01  # m: an oracle's step is decisive when its best and worst candidates differ by more
     onnx_output = "bins"
     plot = ValuePlot("bins", "depth (m)", (0.0, 2.2))
@@ -175,8 +204,15 @@ class DepthQNet(Network[DepthSettings]):
     def bootstrap(self, settings: DepthSettings) -> float:
         return float(settings.bootstrap)
 
-    def scores(self, values: np.ndarray, selection: Selection | None = None) -> np.ndarray:
-        return sequence_scores(values, selection)
+    def candidates(self, actions: np.ndarray, lookahead: int, acting: Selection) -> np.ndarray:
+        """A lookahead net's sequences: each action held, and with `acting.switch` each that switches
+        once (docs/design.md#lookahead-selection)."""
+        actions = np.asarray(actions, np.float64)
+        return actions if lookahead == 1 else candidate_sequences(actions, lookahead, acting.switch)
 
-    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, selection: Selection) -> np.ndarray:
-        return sequence_scores(bins, selection)
+    def scores(self, values: np.ndarray, acting: Selection | None = None) -> np.ndarray:
+        acting = acting or Selection()
+        return sequence_scores(values, acting.rule, acting.discount)
+
+    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, acting: Selection) -> np.ndarray:
+        return sequence_scores(bins, acting.rule, acting.discount)

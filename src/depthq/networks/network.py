@@ -8,14 +8,17 @@ dataclass, a training's `TrainConfig.settings`, spelled `--NAME.FIELD` and store
 it trains (`lr`, its default learning rate; the target its samples learn, `target`, and the samples
 themselves, `samples`; its head, `head_config` and `build_head`; its loss, `loss_function`; the
 head's own training loss is the head's: `depthq.blocks.heads.Head.training_loss`), how it is measured offline
-(`metric`), how it acts (`output`: a head's raw output of one frame's candidates → its values;
-`scores`: values → one score per candidate, `maximise`: whether the highest wins; `tie_tol`; `rule`,
-by the name a checkpoint records), what an exported graph outputs (`onnx_output`), and how its values
+(`metric`), how it acts (its own acting settings, `Acting`: a frozen dataclass, an evaluation's
+`EvalConfig.acting`, spelled `--NAME.FIELD` and stored under its name in a summary; `candidates`: what
+a frame's values are predicted for; `output`: a head's raw output of one frame's candidates → its
+values; `scores`: values → one score per candidate, `maximise`: whether the highest wins; `tie_tol`;
+`rule`, by the name a checkpoint records), what an exported graph outputs (`onnx_output`), and how its values
 are drawn (`plot`). Subclasses set the class attributes and override what differs.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Generic, Literal, Protocol, TypeVar
 
@@ -24,7 +27,7 @@ import torch
 
 from depthq.blocks.heads import Head, HeadConfig
 from depthq.blocks.losses import LossFn
-from depthq.control.action_selection import Selection, first_actions, pick_best
+from depthq.control.action_selection import candidate_sequences, first_actions, pick_best
 from depthq.data.camera_labels import LABEL_SOURCES
 from depthq.data.manifest import Dataset
 from depthq.data.samples import SampleConfig, Target
@@ -36,7 +39,7 @@ S = TypeVar("S")  # a network's own settings (`Network.Settings`)
 
 @dataclass(frozen=True)
 class NoSettings:
-    """The settings of a network that has none of its own."""
+    """The (training or acting) settings of a network that has none of its own."""
 
 
 class Training(Protocol):
@@ -85,7 +88,13 @@ class Network(Generic[S]):
     rule_text: ClassVar[str]  # that rule in words, as an exported graph carries it
     maximise: ClassVar[bool]  # whether the highest score wins (else the lowest)
     tie_tol: ClassVar[float]  # scores within this of the best are tied (`pick_best`)
-    uses_selection: ClassVar[bool] = False  # whether `Selection` (a depth rule) scores its values
+    # Its own acting settings, a frozen dataclass whose defaults are its defaults (an evaluation's
+    # `EvalConfig.acting` holds every network's that has some, by name: which network an evaluation drives
+    # is known only from its checkpoint).
+    Acting: ClassVar[type] = NoSettings
+    # Whether its predicted scores are on its oracle's true scores' scale, so that their difference
+    # measures its error (Depth-Q-Net's metres; not Coll-Q-Net's probabilities against 0 or 1 bumps).
+    comparable_scores: ClassVar[bool] = False
     decisive: ClassVar[float]  # an oracle of it decides a step when its candidates' scores differ by more
     onnx_output: ClassVar[str]  # the exported graph's output name
     plot: ClassVar[ValuePlot]
@@ -149,6 +158,18 @@ class Network(Generic[S]):
         return 0.0
 
     # -- acting ----------------------------------------------------------------------------------
+    def own_acting(self, acting: Mapping[str, Any] | None) -> Any:
+        """Its acting settings among an evaluation's (`EvalConfig.acting`, by network name; None: none
+        given): its own there, else its defaults."""
+        own = (acting or {}).get(self.name)
+        return self.Acting() if own is None else own
+
+    def candidates(self, actions: np.ndarray, lookahead: int, acting: Any) -> np.ndarray:
+        """What one frame's values are predicted for: the candidate `actions` (N,), or for a head that
+        looks `lookahead` steps ahead each held for them (N, K)."""
+        actions = np.asarray(actions, np.float64)
+        return actions if lookahead == 1 else candidate_sequences(actions, lookahead)
+
     def output(self, raw: torch.Tensor) -> torch.Tensor:
         """One frame's candidates' raw head outputs → their values (what a policy and a graph give)."""
         return raw
@@ -157,17 +178,18 @@ class Network(Generic[S]):
         """`output` of F frames' raw outputs (F, N, …) at once: the same values."""
         return raw
 
-    def scores(self, values: np.ndarray, selection: Selection | None = None) -> np.ndarray:
-        """One frame's values → one score per candidate (the best wins: `maximise`)."""
+    def scores(self, values: np.ndarray, acting: Any = None) -> np.ndarray:
+        """One frame's values → one score per candidate (the best wins: `maximise`), by its acting
+        settings (None: its defaults)."""
         return np.asarray(values, np.float64)
 
-    def choose(self, values: np.ndarray, candidates: np.ndarray, selection: Selection | None = None) -> float:
+    def choose(self, values: np.ndarray, candidates: np.ndarray, acting: Any = None) -> float:
         """The action one frame's values select: the best-scoring candidate's first action, ties
         within `tie_tol` going straight if straight is tied, else to the first."""
-        scores = self.scores(values, selection)
+        scores = self.scores(values, acting)
         return pick_best(scores, first_actions(candidates), self.maximise, self.tie_tol)
 
-    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, selection: Selection) -> np.ndarray:
+    def true_scores(self, bins: np.ndarray, bumped: np.ndarray, acting: Any) -> np.ndarray:
         """An oracle of it (`depthq.evaluate.oracle`): each candidate's score from its true bins
         (N, K, bins) and whether it bumps (N,)."""
         raise ConfigError(f"{self.title} has no oracle")

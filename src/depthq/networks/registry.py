@@ -17,7 +17,7 @@ from importlib.metadata import entry_points
 from typing import TypeVar
 
 from depthq.errors import ConfigError
-from depthq.networks.network import Network
+from depthq.networks.network import Network, NoSettings
 
 N = TypeVar("N", bound=type[Network])
 ENTRY_POINTS = "depthq.networks"  # the entry-point group of installed packages' networks
@@ -51,6 +51,13 @@ def network_names() -> tuple[str, ...]:
     """The registered networks' names, in the order registered (Depth-Q-Net, Coll-Q-Net first)."""
     _register_installed()
     return tuple(_NETWORKS)
+
+
+def acting_classes() -> dict[str, type]:
+    """The acting settings' classes (`Network.Acting`) of the registered networks that have some, by
+    name (`EvalConfig.acting`'s)."""
+    return {name: network.Acting for name in network_names()
+            if (network := _NETWORKS[name]).Acting is not NoSettings}
 
 
 def _register_installed() -> None:

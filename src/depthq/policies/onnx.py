@@ -9,21 +9,23 @@ in the metadata (a file without it looks one step ahead).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from depthq.control.action_selection import Selection
 from depthq.control.greedy import GreedyPolicy
 from depthq.errors import ConfigError, DataError
 from depthq.networks import get_network
 
 
 class OnnxPolicy(GreedyPolicy):
-    """Greedy policy of an exported Q-net; `last_values` and `selection` as in `QNetPolicy`."""
+    """Greedy policy of an exported Q-net; `last_values` and `acting` as in `QNetPolicy`."""
 
-    def __init__(self, path: Path, threads: int | None = None, selection: Selection | None = None) -> None:
+    def __init__(
+        self, path: Path, threads: int | None = None, acting: Mapping[str, Any] | None = None
+    ) -> None:
         """`threads`: the session's intra-op threads (None: onnxruntime's default, one per core); an
         evaluation worker runs one, as its torch does."""
         try:
@@ -56,8 +58,7 @@ class OnnxPolicy(GreedyPolicy):
             self.family = ((record.get("dataset") or {}).get("env") or {}).get("world", {}).get("family")
         except (KeyError, ValueError, TypeError) as err:
             raise DataError(f"{path}: not a depthq policy (metadata {err} missing or invalid)") from err
-        self.network = get_network(kind)
-        self._set_candidates(kind, self.network.choose, actions, lookahead, selection)
+        self._set_candidates(get_network(kind), actions, lookahead, acting)
         self._actions = self.candidates.astype(np.float32)
         self.runtime = f"onnxruntime {ort.__version__}"
         self.path = path

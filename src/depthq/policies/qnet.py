@@ -5,7 +5,7 @@ candidate actions through the head in one batch, then the selection rule
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +15,7 @@ import torch
 from depthq.blocks.heads import QNet
 from depthq.blocks.trunk import preprocess
 from depthq.checkpoint import chosen_weights, load_qnet, policy_record, weights_stem
-from depthq.control.action_selection import ACTIONS, Selection
+from depthq.control.action_selection import ACTIONS
 from depthq.control.greedy import GreedyPolicy
 from depthq.control.policy import Observation
 from depthq.errors import ConfigError
@@ -29,8 +29,9 @@ BATCH_FRAMES = 8
 class QNetPolicy(GreedyPolicy):
     """Greedy policy of a Q-net of the network `kind` names (`network`). `last_values` holds the latest
     per-action predictions (for Fig. 4): (N, n_bins) depth bins for Depth-Q-Net (a lookahead one's: step
-    t+1 of each action held), (N,) collision probabilities for Coll-Q-Net. `selection`: how a
-    Depth-Q-Net scores its candidates."""
+    t+1 of each action held), (N,) collision probabilities for Coll-Q-Net. `acting`: an evaluation's
+    acting settings by network name (`EvalConfig.acting`), its network's own used (`Network.Acting`:
+    how a Depth-Q-Net makes and scores its candidates)."""
 
     def __init__(
         self,
@@ -42,14 +43,13 @@ class QNetPolicy(GreedyPolicy):
         source: str | None = None,
         device: torch.device | str = "cpu",
         weights: str | None = None,
-        selection: Selection | None = None,
+        acting: Mapping[str, Any] | None = None,
     ) -> None:
-        self.network = get_network(kind)
         if not actions or any(not -1 <= a <= 1 for a in actions):
             raise ConfigError(f"candidate actions must be a non-empty list within [-1, 1], got {actions}")
         self.device = torch.device(device)
         self.net = net.to(self.device).eval()
-        self._set_candidates(kind, self.network.choose, actions, net.head.config.lookahead, selection)
+        self._set_candidates(get_network(kind), actions, net.head.config.lookahead, acting)
         self._actions_t = torch.tensor(self.candidates, dtype=torch.float32, device=self.device)
         self.input_size = input_size
         self.name = name
@@ -63,11 +63,11 @@ class QNetPolicy(GreedyPolicy):
         weights: str | None = None,
         actions: tuple[float, ...] | None = None,
         device: torch.device | str = "cpu",
-        selection: Selection | None = None,
+        acting: Mapping[str, Any] | None = None,
     ) -> QNetPolicy:
         """The policy of a checkpoint folder: `weights` (None: the checkpoint's choice) and
-        `actions` (None: the checkpoint's) as in `depthq.checkpoint`; `selection` (None: the
-        default rule) for a Depth-Q-Net."""
+        `actions` (None: the checkpoint's) as in `depthq.checkpoint`; `acting` (None: its network's
+        defaults) as in `QNetPolicy`."""
         net, config = load_qnet(Path(folder), weights=weights)
         kind = config["train"]["model"]
         return cls(
@@ -79,7 +79,7 @@ class QNetPolicy(GreedyPolicy):
             source=str(folder),
             device=device,
             weights=weights_stem(chosen_weights(config, weights, Path(folder))),
-            selection=selection,
+            acting=acting,
         )
 
     @torch.inference_mode()

@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
-from depthq.control.action_selection import Selection
+from collections.abc import Mapping
+from typing import Any
+
 from depthq.control.heuristic import DepthHeuristic
 from depthq.control.ou import OUPolicy
 from depthq.control.policy import Policy
@@ -17,19 +19,20 @@ def make_policy(
     seed: int | None = None,
     weights: str | None = None,
     device: str = "cpu",
-    selection: Selection | None = None,
+    acting: Mapping[str, Any] | None = None,
     threads: int | None = None,
 ) -> Policy:
     """The policy `spec` names (a string is parsed: `PolicySpec.parse`). A checkpoint's Q-net takes
     `weights` (`depthq.checkpoint.weights_stem`, None: the checkpoint's choice) and runs on
-    torch `device`. `selection`: how a Depth-Q-Net scores its candidates (None: the default rule;
-    docs/design.md#lookahead-selection). `threads`: an ONNX session's (torch's are the process's,
-    `torch.set_num_threads`)."""
+    torch `device`. `acting`: an evaluation's acting settings by network name (`EvalConfig.acting`;
+    None: the defaults), of which a Q-net's network's own are used (how a Depth-Q-Net makes and
+    scores its candidates: docs/design.md#lookahead-selection). `threads`: an ONNX session's
+    (torch's are the process's, `torch.set_num_threads`)."""
     spec = PolicySpec.parse(spec)
     if spec.kind == "heuristic":
         return DepthHeuristic()
     if spec.kind == "ou":
         return OUPolicy(seed=seed)
     if spec.kind == "onnx":
-        return OnnxPolicy(spec.path, threads=threads, selection=selection)
-    return QNetPolicy.from_checkpoint(spec.path, weights=weights, device=device, selection=selection)
+        return OnnxPolicy(spec.path, threads=threads, acting=acting)
+    return QNetPolicy.from_checkpoint(spec.path, weights=weights, device=device, acting=acting)

@@ -7,7 +7,9 @@ import json
 from pathlib import Path
 
 from depthq.blocks.device import DEVICE_HELP
+from depthq.blocks.migrations import RENAMED_EVAL_SETTINGS
 from depthq.errors import ConfigError
+from depthq.flags import add_config_arguments, config_flags, config_from_args, flag_name
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -61,9 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      "(default: --decisions / 20, at least 1)")
     pol.add_argument("--threads", type=int, default=None,
                      help="torch threads (default: this process's cores; an evaluation worker has 1)")
-    pol.add_argument("--switch", action="store_true",
-                     help="a lookahead Depth-Q-Net also scores sequences that switch action once: its "
-                     "largest candidate set (docs/design.md#lookahead-selection)")
+    from depthq.evaluate.online import EvalConfig  # MuJoCo: only when this verb's flags are built
+    from depthq.networks import acting_classes
+
+    # The networks' acting settings, as `depthq evaluate` takes them (--depth.switch: a lookahead
+    # Depth-Q-Net's largest candidate set, docs/design.md#lookahead-selection; --switch, as before).
+    acting = tuple(f.path for f in config_flags(EvalConfig) if f.path.partition(".")[0] in acting_classes())
+    add_config_arguments(pol, EvalConfig, only=acting,
+                         aliases={RENAMED_EVAL_SETTINGS["switch"]: (flag_name("switch"),)})
     ev = sub.add_parser("evaluate", help="one policy in 20 canyons, one canyon at a time vs lock-step")
     ev.add_argument("--policy", required=True, help="'heuristic', a checkpoint folder or onnx:PATH")
     ev.add_argument("--canyons", default="val:1000-1019",
@@ -238,7 +245,10 @@ def _measure(args: argparse.Namespace) -> tuple[dict, str]:
     from depthq.policies.spec import PolicySpec
 
     specs = [PolicySpec.parse(spec) for spec in args.policy] if args.policy else None
-    r = bench_policy(specs, args.decisions, args.device, args.batches, args.threads, args.switch)
+    from depthq.evaluate.online import EvalConfig
+
+    acting = config_from_args(EvalConfig, args).acting
+    r = bench_policy(specs, args.decisions, args.device, args.batches, args.threads, acting)
     each = [f"{p['policy']} ({p['candidates']} candidates): {p['ms_median']} ms median ({p['ms_p90']} ms p90)"
             + _in_batch(p, r["batch"]) for p in r["policies"]]
     return r, "per decision: " + "; ".join(each) + f" ({r['threads']} threads)"

@@ -10,12 +10,15 @@ import numpy as np
 from PIL import Image
 
 from depthq.blocks.device import DEVICE_HELP, resolve_device
+from depthq.blocks.migrations import RENAMED_EVAL_SETTINGS
 from depthq.errors import ConfigError
-from depthq.flags import add_config_arguments, config_from_args
+from depthq.flags import add_config_arguments, config_from_args, flag_name
 
 # EvalConfig's flags drive shares with `depthq evaluate`, and their spellings from before they were
-# made from it (aliases); the canyon is drive's own (one), and it drives no lock-step batch.
-_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",)}
+# made from it or were a network's own (aliases: --rule for --depth.rule); the canyon is drive's own
+# (one), and it drives no lock-step batch.
+_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",),
+            **{path: (flag_name(old),) for old, path in RENAMED_EVAL_SETTINGS.items()}}
 _HELP = {"seed": "drive seeds its one run and policy with it as it is, whatever the canyon"}
 
 
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     spec = PolicySpec.parse(args.policy)
     config = at_policy_rate(config_from_args(EvalConfig, args, canyons=(str(canyon),)), spec)
     policy = make_policy(spec, seed=config.seed, weights=config.weights, device=device,
-                         selection=config.selection)
+                         acting=config.acting)
     env = CanyonEnv(config.env)
     seed = config.seed
     try:

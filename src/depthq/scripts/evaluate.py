@@ -7,12 +7,15 @@ import json
 from pathlib import Path
 
 from depthq.blocks.device import DEVICE_HELP
-from depthq.flags import add_config_arguments, config_from_args
+from depthq.blocks.migrations import RENAMED_EVAL_SETTINGS
+from depthq.flags import add_config_arguments, config_from_args, flag_name
 from depthq.parallel import add_executor_arguments, executor_from
 
-# EvalConfig's fields keep the flags they had before they were made from it, as aliases; --canyons
-# stays a canyon set ('eval:0-4'), parsed by the verb.
-_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",)}
+# EvalConfig's fields keep the flags they had before they were made from it, as aliases, and
+# Depth-Q-Net's acting settings the flat ones they had before they were its own (--rule for
+# --depth.rule); --canyons stays a canyon set ('eval:0-4'), parsed by the verb.
+_ALIASES = {"time_limit_s": ("--time-limit",), "decision_hz": ("--hz",), "weights": ("--which",),
+            **{path: (flag_name(old),) for old, path in RENAMED_EVAL_SETTINGS.items()}}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
