@@ -24,8 +24,9 @@ the dataset holds runs rendered again in other looks, `depthq dataset rerender`)
 `measure` trains nothing but the probe (seconds); the checkpoints and their datasets are read only.
 `run` gives Coll-Q-Net its chances on the data of checkpoint LIKE (its training config, varied by each of
 VARIANTS): each variant trained into OUT/models/<variant> (resumed), driven in `--canyons` (never the
-`eval` ones) in the data's look or `--look` into OUT/eval/<variant>, measured as above; then the table
-with each variant's distance to the first collision (OUT/results.json).
+`eval` ones) in the data's look into OUT/eval/<variant>, or in `--look` into OUT/eval_<look>/<variant>
+(the same trained variants), measured as above; then the table with each variant's distance to the
+first collision (OUT/results.json).
 """
 
 from __future__ import annotations
@@ -180,6 +181,9 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
         raise ConfigError(f"--canyons {canyons!r}: the eval canyons are the test set; choose in val ones")
     base = read_config(like)
     train_config = from_dict(TrainConfig, base["train"])
+    # Driven in the data's own look into eval/, in another look into eval_<its name>/ (keyed so too):
+    # the same trained variants, a drive per look.
+    where, key = ("eval", "{}") if look is None else (f"eval_{Path(look).name}", f"{Path(look).name}/{{}}")
     look = look or look_of(Dataset.open(Path(train_config.data)))
     results_path = out / "results.json"
     results: dict[str, Any] = read_checked_json(results_path, FIX) if results_path.is_file() else {}
@@ -188,18 +192,18 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
         trained = "pinned" if not settings else name
         folder = out / "models" / trained
         train(replace(train_config, **settings), folder, progress=False)
-        driven = out / "eval" / name
+        driven = out / where / name
         config = EvalConfig(canyons=parse_canyon_set(canyons), look=look, weights=weights)
         if not evaluation_done(driven):
             evaluate(str(folder), driven, config, workers=1, progress=False, video=False)
         row = measure(folder, weights)[0]
         row["variant"] = name
         row["distance"] = read_json(driven / "summary.json")["summary"]["distance_to_collision_mean"]
-        results[name] = row
+        results[key.format(name)] = row
         write_checked_json(results_path, results)
-        print(f"{name}: {row['distance']:.2f} m, AUC {row['auc']:.3f}, spread {row['spread']:.3f}",
-              flush=True)
-    print(table([results[name] for name in variants], first="variant"))
+        print(f"{name} in the {look} look: {row['distance']:.2f} m, AUC {row['auc']:.3f}, "
+              f"spread {row['spread']:.3f}", flush=True)
+    print(table([results[key.format(name)] for name in variants], first="variant"))
     return 0
 
 

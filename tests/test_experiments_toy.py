@@ -182,6 +182,11 @@ def test_coll_learning_measures_a_coll_q_net_and_trains_drives_and_resumes_its_v
     pinned = out / "eval" / "pinned" / "summary.json"
     stamp = pinned.stat().st_mtime_ns
     assert coll_learning.main(argv) == 0 and pinned.stat().st_mtime_ns == stamp  # resumed: not driven again
+    assert coll_learning.main([*argv[:4], "pinned", *argv[5:], "--look", "flat"]) == 0  # another look
+    flat = json.loads((out / "eval_flat" / "pinned" / "summary.json").read_text())
+    assert flat["config"]["look"] == "flat" and pinned.stat().st_mtime_ns == stamp  # its own drive
+    results = read_checked_json(out / "results.json", coll_learning.FIX)
+    assert set(results) == {"pinned", "final", "flat/pinned"}
     assert coll_learning.main(["run", str(like), str(tmp_path / "bad"), "--canyons", "hard/eval:0"]) == 2
     assert not (tmp_path / "bad").exists()
 
