@@ -26,7 +26,7 @@ from depthq.data.rerender import STRIDE, dataset_env, render_frames, verify_rend
 from depthq.data.runfile import encode_jpeg, write_run
 from depthq.data.samples import bins_target
 from depthq.data.stats import dataset_stats, format_stats
-from depthq.data.subsets import select_runs, usable_runs
+from depthq.data.subsets import first_runs, select_runs, usable_runs
 from depthq.data.views import view_arrays
 from depthq.sim.canyon import CanyonId, generate_canyon
 from depthq.sim.world import CanyonWorld
@@ -220,12 +220,15 @@ def test_verify_names_a_rerender_whose_data_is_not_its_source(rendered: Path, tm
     assert "differs from its source" in capsys.readouterr().err
 
 
-def test_training_views_take_n_collected_runs_and_their_looks(rendered: Path) -> None:
+def test_training_views_and_labeller_pools_take_n_collected_runs_and_their_looks(rendered: Path) -> None:
     dataset = Dataset.open(rendered)
     first = usable_runs(dataset, "train", 20)[0]
     assert all(e.rendered is None for e in usable_runs(dataset, "train", 20))  # Table II's: collected runs
     chosen = select_runs(dataset, "train", 1, 20)
     assert [e.index for e in chosen] == [first.index, STRIDE + first.index, 2 * STRIDE + first.index]
+    pool = first_runs(dataset, "train", 1)  # a labeller's: the first collected run, in every look
+    assert [e.index for e in pool] == [0, STRIDE, 2 * STRIDE]
+    assert len(first_runs(dataset, "train", 10)) == len(dataset.entries("train"))
     arrays = view_arrays(dataset, "val", None, bins_target)
     val = [e.index for e in dataset.entries("val") if e.rendered is None]
     assert sorted(set(arrays["run_id"].tolist())) == sorted(v * STRIDE + i for v in range(3) for i in val)

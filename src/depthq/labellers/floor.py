@@ -28,6 +28,7 @@ from torch import nn
 from depthq.configio import from_dict, to_dict
 from depthq.data.manifest import Dataset, RunEntry
 from depthq.data.run import Run
+from depthq.data.subsets import first_runs
 from depthq.errors import DataError
 from depthq.progress import Bar
 from depthq.sim.mjcf import CameraConfig, RobotConfig
@@ -316,7 +317,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
           ) -> tuple[FloorNet, list[float], float]:
     """The floor net learnt on `dataset`'s frames and poses (a LabellerConfig): (net, losses, val loss)."""
     rng = np.random.default_rng(config.seed)
-    train_pool = _pool(dataset, dataset.entries("train")[: config.pool_runs], geo, config, rng, progress)
+    train_pool = _pool(dataset, first_runs(dataset, "train", config.pool_runs), geo, config, rng, progress)
     val_pool = _pool(dataset, dataset.entries("val"), geo, replace(config, pool_frames=1), rng, False)
     above = torch.zeros(geo.shape, dtype=torch.bool, device=device)
     above[: int(geo.shape[0] / 2) - 1] = True

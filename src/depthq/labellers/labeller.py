@@ -118,7 +118,8 @@ class LabellerConfig:
     # floor, monodepth: random frames of each training run in the training pool (held in memory,
     # reduced; monodepth: each with its two neighbours).
     pool_frames: int = 6
-    # floor, monodepth: the first training runs whose frames make the pool.
+    # floor, monodepth: the first collected training runs whose frames make the pool, each with its
+    # re-renders (`depthq dataset rerender`): the same runs in every look the dataset holds.
     pool_runs: int = 300
     # monodepth: the nearest depth the net can predict, m.
     min_depth: float = 0.1

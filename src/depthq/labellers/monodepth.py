@@ -35,6 +35,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from depthq.data.manifest import Dataset, RunEntry
+from depthq.data.subsets import first_runs
 from depthq.errors import DataError
 from depthq.labellers.floor import BATCH, Geometry, ReadingsEstimate, reduce
 from depthq.progress import Bar
@@ -267,7 +268,7 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
           ) -> tuple[DepthNet, list[float], float]:
     """The depth net learnt on `dataset`'s frames and poses (a LabellerConfig): (net, losses, val loss)."""
     rng = np.random.default_rng(config.seed)
-    train_pool = _pool(dataset, dataset.entries("train")[: config.pool_runs], geo, config, rng, progress)
+    train_pool = _pool(dataset, first_runs(dataset, "train", config.pool_runs), geo, config, rng, progress)
     val_pool = _pool(dataset, dataset.entries("val"), geo, replace(config, pool_frames=1), rng, False)
     camera, depth_range = intrinsics(geo).to(device), (config.min_depth, config.max_depth)
     net = DepthNet(config.width, disparity_of(START_DEPTH, *depth_range)).to(device)
