@@ -139,10 +139,9 @@ def measure(checkpoint: Path, weights: str | None = None) -> list[dict[str, Any]
                        action.reshape(len(feature), -1) * train.action_scale], 1)
     p_probe = probe(x_train, torch.from_numpy(targets["train"]), x_val)
     rate = float(targets["train"].mean())
-    entries = dataset.entries("val")
     looks = {0: look_of(dataset) or "collected"}
     looks.update({k: look for k, (look, _) in rendered_looks(dataset).items()})
-    version = np.array([entries[int(r)].index // STRIDE for r in arrays["run_id"]])
+    version = np.asarray(arrays["run_id"]) // STRIDE  # a run's index: v × STRIDE + its source's
     metrics = read_metrics(checkpoint)
     rows = []
     for v in sorted(set(version.tolist())):

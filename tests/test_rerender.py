@@ -259,6 +259,10 @@ def test_a_net_trains_on_every_look_and_the_cache_holds_each(rendered: Path, tmp
     assert sum(n for _, n in runs.values()) == sum(e.n_frames for e in dataset.entries())
     assert features_ready(dataset, json.loads(index.read_text())["trunk"],
                           json.loads(index.read_text())["input_size"])
+    from research import coll_learning  # measured per look of its validation runs
+
+    coll = train(TrainConfig(model="coll", data=str(root), **fast), tmp_path / "coll", progress=False)
+    assert [row["look"] for row in coll_learning.measure(coll)] == ["flat", *LOOKS]
 
 
 def test_bad_input_is_refused_and_writes_nothing(tiny: Path, tmp_path: Path,
