@@ -257,7 +257,7 @@ PINNED_LABELLER: dict[str, Any] = {
     "trunk": "efficientnet_lite0_columns", "input_size": 128, "hidden": 4096, "scale": 4, "width": 16,
     "context": True, "lookahead": 12, "nearest": 0.3, "memory_s": 2.0, "pool_frames": 6, "pool_runs": 300,
     "min_depth": 0.1, "max_depth": 10.0, "smoothness": 0.001, "steps": 1500, "batch_size": 8, "lr": 0.001,
-    "seed": 0, "brightness": "none",
+    "seed": 0, "brightness": "none", "pool": "collected",
 }
 PINNED_PRESET, PINNED_METHOD = "hard", "monodepth"  # another preset or labeller trains as it does today
 

@@ -226,9 +226,10 @@ def test_training_views_and_labeller_pools_take_n_collected_runs_and_their_looks
     assert all(e.rendered is None for e in usable_runs(dataset, "train", 20))  # Table II's: collected runs
     chosen = select_runs(dataset, "train", 1, 20)
     assert [e.index for e in chosen] == [first.index, STRIDE + first.index, 2 * STRIDE + first.index]
-    pool = first_runs(dataset, "train", 1)  # a labeller's: the first collected run, in every look
-    assert [e.index for e in pool] == [0, STRIDE, 2 * STRIDE]
-    assert len(first_runs(dataset, "train", 10)) == len(dataset.entries("train"))
+    pool = first_runs(dataset, "train", 1, every_look=True)  # a labeller's: the first collected run
+    assert [e.index for e in pool] == [0, STRIDE, 2 * STRIDE]  # in every look
+    assert len(first_runs(dataset, "train", 10, every_look=True)) == len(dataset.entries("train"))
+    assert [e.index for e in first_runs(dataset, "train", 10, every_look=False)] == [0, 1]  # as collected
     arrays = view_arrays(dataset, "val", None, bins_target)
     val = [e.index for e in dataset.entries("val") if e.rendered is None]
     assert sorted(set(arrays["run_id"].tolist())) == sorted(v * STRIDE + i for v in range(3) for i in val)

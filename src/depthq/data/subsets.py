@@ -48,11 +48,11 @@ def select_runs(dataset: Dataset, split: str, n_runs: int | None, min_frames: in
     return with_renders(dataset, split, runs[:n_runs])
 
 
-def first_runs(dataset: Dataset, split: str, n_runs: int) -> list[RunEntry]:
-    """The first `n_runs` collected runs of `split` (usable or not) and their re-renders: a labeller's
-    pool, the same runs in every look the dataset holds."""
-    collected = [entry for entry in dataset.entries(split) if entry.rendered is None]
-    return with_renders(dataset, split, collected[:n_runs])
+def first_runs(dataset: Dataset, split: str, n_runs: int, every_look: bool) -> list[RunEntry]:
+    """The first `n_runs` collected runs of `split` (usable or not), with their re-renders if
+    `every_look`: a labeller's pool."""
+    collected = [entry for entry in dataset.entries(split) if entry.rendered is None][:n_runs]
+    return with_renders(dataset, split, collected) if every_look else collected
 
 
 def with_renders(dataset: Dataset, split: str, runs: list[RunEntry]) -> list[RunEntry]:

@@ -317,7 +317,8 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
           ) -> tuple[FloorNet, list[float], float]:
     """The floor net learnt on `dataset`'s frames and poses (a LabellerConfig): (net, losses, val loss)."""
     rng = np.random.default_rng(config.seed)
-    train_pool = _pool(dataset, first_runs(dataset, "train", config.pool_runs), geo, config, rng, progress)
+    pooled = first_runs(dataset, "train", config.pool_runs, config.pool == "every_look")
+    train_pool = _pool(dataset, pooled, geo, config, rng, progress)
     val_pool = _pool(dataset, dataset.entries("val"), geo, replace(config, pool_frames=1), rng, False)
     above = torch.zeros(geo.shape, dtype=torch.bool, device=device)
     above[: int(geo.shape[0] / 2) - 1] = True

@@ -27,7 +27,7 @@ import hashlib
 import json
 import typing
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -42,6 +42,7 @@ from depthq.blocks.trunk import DEFAULT_TRUNK, INPUT_SIZE, TRUNKS, Trunk, build_
 from depthq.checkpoint import DIGEST, read_weights, weights_bytes
 from depthq.checksum import read_checked_json, write_checked_json
 from depthq.configio import (
+    OMIT_DEFAULT,
     atomic_write_bytes,
     check_choices,
     check_seed,
@@ -69,6 +70,7 @@ LOG_BLOCKS = 10  # the training loss is recorded as the mean over each tenth of 
 
 
 Method = Literal["floor", "perception", "monodepth"]
+PoolLooks = Literal["collected", "every_look"]
 METHODS: tuple[str, ...] = typing.get_args(Method)
 # The trunks a perception labeller reads: frozen ones, whose features are cached in its dataset.
 FrozenTrunk = Literal[tuple(name for name, spec in TRUNKS.items() if spec.frozen)]  # type: ignore[valid-type]
@@ -118,9 +120,12 @@ class LabellerConfig:
     # floor, monodepth: random frames of each training run in the training pool (held in memory,
     # reduced; monodepth: each with its two neighbours).
     pool_frames: int = 6
-    # floor, monodepth: the first collected training runs whose frames make the pool, each with its
-    # re-renders (`depthq dataset rerender`): the same runs in every look the dataset holds.
+    # floor, monodepth: the first collected training runs whose frames make the pool.
     pool_runs: int = 300
+    # floor, monodepth: the pool's looks in a re-rendered dataset (`depthq dataset rerender`): "collected"
+    # (the runs as collected) or "every_look" (each with its re-renders). "collected" read depth better
+    # on `val` (docs/research/looks.md#labeller-pool).
+    pool: PoolLooks = field(default="collected", metadata=OMIT_DEFAULT)
     # monodepth: the nearest depth the net can predict, m.
     min_depth: float = 0.1
     # monodepth: the farthest depth the net can predict, m: beyond the bins' clip, as the floor and the
@@ -148,7 +153,7 @@ class LabellerConfig:
         check_seed(self.seed)
         if not isinstance(self.data, str) or not self.data:
             raise ConfigError(f"labeller.data must be a dataset folder, got {self.data!r}")
-        check_choices(self, "labeller")  # method, trunk, brightness
+        check_choices(self, "labeller")  # method, trunk, brightness, pool
         for name, value in zip(("scale", "steps", "batch_size", "lr"), _DEFAULTS[self.method], strict=True):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)

@@ -268,7 +268,8 @@ def train(dataset: Dataset, geo: Geometry, config: Any, progress: bool, device: 
           ) -> tuple[DepthNet, list[float], float]:
     """The depth net learnt on `dataset`'s frames and poses (a LabellerConfig): (net, losses, val loss)."""
     rng = np.random.default_rng(config.seed)
-    train_pool = _pool(dataset, first_runs(dataset, "train", config.pool_runs), geo, config, rng, progress)
+    pooled = first_runs(dataset, "train", config.pool_runs, config.pool == "every_look")
+    train_pool = _pool(dataset, pooled, geo, config, rng, progress)
     val_pool = _pool(dataset, dataset.entries("val"), geo, replace(config, pool_frames=1), rng, False)
     camera, depth_range = intrinsics(geo).to(device), (config.min_depth, config.max_depth)
     net = DepthNet(config.width, disparity_of(START_DEPTH, *depth_range)).to(device)
