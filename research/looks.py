@@ -223,6 +223,11 @@ def share_labeller(out: Path, name: str, method: str) -> None:
 
 CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment make their choices
 NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
+# Nets driven again with other weights than their own choice: Coll-Q-Net with its last epoch's, which
+# drove 2-7 times as far as its best epoch in every look of the broad+looks recipe on `val`
+# (docs/research/looks.md#coll-weights), so that the table gives it its best chance. key → (net, weights).
+REWEIGHED = {"coll_final": ("coll", "final")}
+DRIVEN = {**NETS, "coll_final": "Coll-Q-Net, last epoch's weights"}  # the nets of the distance table
 # The labellers are measured in every driving look on OUT/val_<look>/data: VAL_RUNS validation runs (in
 # the `val` canyons, as a dataset's val split) collected with VAL_SEED, a seed no sweep collects with
 # (sweeps draw their OU and sensor noise from seed 0), so no frame is one a labeller or net learnt on.
@@ -498,10 +503,15 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
         for drive in drive_looks:
             config = replace(driving, look=look_of(out, drive))
             for seed in seeds:
-                for net, checkpoint in checkpoints(out, name, runs, seed, method).items():
+                trained = checkpoints(out, name, runs, seed, method)
+                for net, checkpoint in trained.items():
                     if (checkpoint / CONFIG).is_file():
                         _drive(checkpoint, out / name / f"eval_{drive}" / f"{net}_s{seed}", config,
                                workers, progress, device)
+                for key, (net, weights) in REWEIGHED.items():
+                    if (trained[net] / CONFIG).is_file():
+                        _drive(trained[net], out / name / f"eval_{drive}" / f"{key}_s{seed}",
+                               replace(config, weights=weights), workers, progress, device)
     if train_only:
         print(f"trained: {', '.join(recipes)}; choose among them with `{PROG} diagnose` on `val`")
         return 0
@@ -626,7 +636,7 @@ def table_rows(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2),
     [95 % interval] over seeds, ends reached in all), and each driving look's mean as a share of the
     training look's own."""
     rows = []
-    for net, label in NETS.items():
+    for net, label in DRIVEN.items():
         for look in train_looks:
             means, row = {}, {"Q-net": label, "trained in": look}
             for drive in drive_looks:
@@ -821,9 +831,10 @@ def recipe_answers(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2
     """Issue #57's "done when" of each training look or recipe but the reference (the colour look's
     camera-label Depth-Q-Net driven in colours), answered from what OUT holds: its camera-label
     Depth-Q-Net's distance in every driving look against `RECIPE_SHARE` of the reference's and
-    against its own Coll-Q-Net's; its agreement with the depth oracle on decisive steps in the
-    textured and held-out looks against the colour-trained LiDAR-label net's in colours (`diagnose`);
-    its labeller's error there against `LABELLER_RATIO` × its error in colours; its nets' dead outputs."""
+    against its own Coll-Q-Net's (the farther of its own weights and `REWEIGHED`'s); its agreement
+    with the depth oracle on decisive steps in the textured and held-out looks against the
+    colour-trained LiDAR-label net's in colours (`diagnose`); its labeller's error there against
+    `LABELLER_RATIO` × its error in colours; its nets' dead outputs."""
     reference = _mean(_d2c(_distances(out, "camera", COLOURS, COLOURS, seeds)))
     agreed = _mean(_agreements(out, "depth", COLOURS, COLOURS, seeds))
     lines = []
@@ -833,7 +844,8 @@ def recipe_answers(out: Path, runs: int = 500, seeds: tuple[int, ...] = (0, 1, 2
         drives, shares, ahead = [], [], 0
         for drive in drive_looks:
             camera = _mean(_d2c(_distances(out, "camera", look, drive, seeds)))
-            coll = _mean(_d2c(_distances(out, "coll", look, drive, seeds)))
+            colls = [_mean(_d2c(_distances(out, key, look, drive, seeds))) for key in ("coll", *REWEIGHED)]
+            coll = max((c for c in colls if c is not None), default=None)  # its best chance
             ahead += camera is not None and coll is not None and camera > coll
             if camera is None or reference is None:
                 drives.append(f"{drive} –")
@@ -881,10 +893,10 @@ def distance_figure(path: Path, out: Path, seeds: tuple[int, ...] = (0, 1, 2),
                     ) -> None:
     """Per net a panel: for each driving look a bar per training look or recipe, the mean distance to
     the first collision over the seeds evaluated, each seed's a dot."""
-    figure_, axes = plt.subplots(1, len(NETS), figsize=(4.8 * len(NETS), 3.6), sharey=True, squeeze=False)
+    figure_, axes = plt.subplots(1, len(DRIVEN), figsize=(4.8 * len(DRIVEN), 3.6), sharey=True, squeeze=False)
     width = 0.8 / len(train_looks)
     x = np.arange(len(drive_looks))
-    for ax, (net, label) in zip(axes[0], NETS.items(), strict=True):
+    for ax, (net, label) in zip(axes[0], DRIVEN.items(), strict=True):
         for k, look in enumerate(train_looks):
             values = [_d2c(_distances(out, net, look, drive, seeds)) for drive in drive_looks]
             where = x + (k - (len(train_looks) - 1) / 2) * width

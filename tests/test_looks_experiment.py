@@ -32,9 +32,10 @@ def test_the_looks_experiment_trains_in_one_look_drives_in_others_and_resumes(tm
     assert looks.main(["run", str(out), *TOY]) == 0
     manifest = json.loads((out / "textured" / "sweep" / "data" / "manifest.json").read_text())
     assert manifest["config"]["env"]["world"]["look"] == "textured"
-    for net in ("depth", "camera", "coll"):  # trained in the textured look, driven in the held-out one
+    for net in ("depth", "camera", "coll", "coll_final"):  # trained textured, driven in the held-out look
         summary = json.loads((out / "textured" / "eval_heldout" / f"{net}_s0" / "summary.json").read_text())
         assert summary["look"] == "heldout" and summary["config"]["canyons"] == ["hard/val:1001"]
+        assert (summary["config"].get("weights") == "final") == (net == "coll_final")  # its best chance
     # the labeller measured on validation runs of the driving look: its own seed, val canyons, that look
     val = Dataset.open(out / "val_heldout" / "data")
     assert val.seed == looks.VAL_SEED and val.config["env"]["world"]["look"] == "heldout"
