@@ -182,7 +182,8 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
     train_config = from_dict(TrainConfig, base["train"])
     # Driven in the data's own look into eval/, in another look into eval_<its name>/ (keyed so too):
     # the same trained variants, a drive per look.
-    where, key = ("eval", "{}") if look is None else (f"eval_{Path(look).name}", f"{Path(look).name}/{{}}")
+    evals = out / ("eval" if look is None else f"eval_{Path(look).name}")
+    prefix = "" if look is None else f"{Path(look).name}/"
     look = look or look_of(Dataset.open(Path(train_config.data)))
     results_path = out / "results.json"
     results: dict[str, Any] = read_checked_json(results_path, FIX) if results_path.is_file() else {}
@@ -191,18 +192,18 @@ def run(like: Path, out: Path, variants: tuple[str, ...], canyons: str, look: st
         trained = "pinned" if not settings else name
         folder = out / "models" / trained
         train(replace(train_config, **settings), folder, progress=False)
-        driven = out / where / name
+        driven = evals / name
         config = EvalConfig(canyons=parse_canyon_set(canyons), look=look, weights=weights)
         if not evaluation_done(driven):
             evaluate(str(folder), driven, config, workers=1, progress=False, video=False)
         row = measure(folder, weights)[0]
         row["variant"] = name
         row["distance"] = read_json(driven / "summary.json")["summary"]["distance_to_collision_mean"]
-        results[key.format(name)] = row
+        results[prefix + name] = row
         write_checked_json(results_path, results)
         print(f"{name} in the {look} look: {row['distance']:.2f} m, AUC {row['auc']:.3f}, "
               f"spread {row['spread']:.3f}", flush=True)
-    print(table([results[key.format(name)] for name in variants], first="variant"))
+    print(table([results[prefix + name] for name in variants], first="variant"))
     return 0
 
 

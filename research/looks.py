@@ -225,9 +225,10 @@ CHOOSE = "hard/val:1000-1019"  # where the sweep and the camera-label experiment
 NETS = {"depth": "Depth-Q-Net, LiDAR labels", "camera": "Depth-Q-Net, camera labels", "coll": "Coll-Q-Net"}
 # Nets driven again with other weights than their own choice: Coll-Q-Net with its last epoch's, which
 # drove 2-7 times as far as its best epoch in every look of the broad+looks recipe on `val`
-# (docs/research/looks.md#coll-weights), so that the table gives it its best chance. key → (net, weights).
-REWEIGHED = {"coll_final": ("coll", "final")}
-DRIVEN = {**NETS, "coll_final": "Coll-Q-Net, last epoch's weights"}  # the nets of the distance table
+# (docs/research/looks.md#coll-weights), so that the table gives it its best chance.
+# key → (net, weights, label).
+REWEIGHED = {"coll_final": ("coll", "final", "Coll-Q-Net, last epoch's weights")}
+DRIVEN = {**NETS, **{key: label for key, (_, _, label) in REWEIGHED.items()}}  # the distance table's rows
 # The labellers are measured in every driving look on OUT/val_<look>/data: VAL_RUNS validation runs (in
 # the `val` canyons, as a dataset's val split) collected with VAL_SEED, a seed no sweep collects with
 # (sweeps draw their OU and sensor noise from seed 0), so no frame is one a labeller or net learnt on.
@@ -508,7 +509,7 @@ def run(out: Path, *, preset: str = "hard", runs: int = 500, seeds: tuple[int, .
                     if (checkpoint / CONFIG).is_file():
                         _drive(checkpoint, out / name / f"eval_{drive}" / f"{net}_s{seed}", config,
                                workers, progress, device)
-                for key, (net, weights) in REWEIGHED.items():
+                for key, (net, weights, _) in REWEIGHED.items():
                     if (trained[net] / CONFIG).is_file():
                         _drive(trained[net], out / name / f"eval_{drive}" / f"{key}_s{seed}",
                                replace(config, weights=weights), workers, progress, device)
